@@ -1,0 +1,126 @@
+"""The ``crashdem`` command line.
+
+Subcommands: ``run``, ``info``, ``plot``, ``export``, ``diagnose``, ``schema`` (and, later,
+``sweep`` and ``calibrate``). Errors in user input end with a one-line message and exit code 2;
+no traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from pathlib import Path
+
+log = logging.getLogger("crashdem")
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from crashdem import scenario as sc
+    from crashdem.run import run_scenario
+
+    overrides = dict(sc.parse_override(s) for s in args.set or [])
+    scen = sc.load(args.scenario, overrides)
+    path = run_scenario(scen, out_dir=args.out, progress=not args.quiet, resume=args.resume,
+                        plots=None if not args.no_plots else False)
+    print(path)
+    return 0
+
+
+def _cmd_info(args: argparse.Namespace) -> int:
+    from crashdem.results import open_result
+
+    with open_result(args.result) as res:
+        print(res.summary())
+    return 0
+
+
+def _cmd_plot(args: argparse.Namespace) -> int:
+    from crashdem.plotting import plot_result
+
+    out = Path(args.out) if args.out else Path(args.result).with_suffix("")
+    for p in plot_result(args.result, out, channels=args.channel or None):
+        print(p)
+    return 0
+
+
+def _cmd_export(args: argparse.Namespace) -> int:
+    from crashdem.export import export_result
+
+    for p in export_result(args.result, fmt=args.format, out=args.out):
+        print(p)
+    return 0
+
+
+def _cmd_diagnose(args: argparse.Namespace) -> int:
+    from crashdem.diagnosis.cli import diagnose_command
+
+    return diagnose_command(args)
+
+
+def _cmd_schema(args: argparse.Namespace) -> int:
+    from crashdem.scenario import schema_markdown
+
+    print(schema_markdown())
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="crashdem", description=__doc__.splitlines()[0])
+    p.add_argument("--log-level", default="INFO", choices=["DEBUG", "INFO", "WARNING", "ERROR"])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run a scenario (TOML) and write HDF5 + plots")
+    r.add_argument("scenario")
+    r.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a scenario field")
+    r.add_argument("--out", default=None, help="output directory (default: output.directory)")
+    r.add_argument("--quiet", action="store_true", help="no progress bar")
+    r.add_argument("--resume", action="store_true", help="continue a killed run from its last checkpoint")
+    r.add_argument("--no-plots", action="store_true")
+    r.set_defaults(func=_cmd_run)
+
+    i = sub.add_parser("info", help="print a result file's summary")
+    i.add_argument("result")
+    i.set_defaults(func=_cmd_info)
+
+    pl = sub.add_parser("plot", help="plot a result's channels to PNG")
+    pl.add_argument("result")
+    pl.add_argument("--out", default=None)
+    pl.add_argument("--channel", action="append")
+    pl.set_defaults(func=_cmd_plot)
+
+    e = sub.add_parser("export", help="export particle snapshots for ParaView")
+    e.add_argument("result")
+    e.add_argument("--format", choices=["vtu", "xdmf"], default="vtu")
+    e.add_argument("--out", default=None)
+    e.set_defaults(func=_cmd_export)
+
+    d = sub.add_parser("diagnose", help="locate a simulation-recording mismatch and name the missing physics")
+    d.add_argument("--scenario", required=True)
+    d.add_argument("--recording", required=True)
+    d.add_argument("--channel", action="append")
+    d.add_argument("--out", required=True)
+    d.add_argument("--set", action="append", metavar="KEY=VALUE")
+    d.add_argument("--full-confirm", type=int, default=None,
+                   help="confirm the top hypotheses with this many full DEM runs at most")
+    d.set_defaults(func=_cmd_diagnose)
+
+    s = sub.add_parser("schema", help="print the scenario field reference (Markdown)")
+    s.set_defaults(func=_cmd_schema)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    from crashdem.scenario import ScenarioError
+
+    args = build_parser().parse_args(argv)
+    level = "WARNING" if getattr(args, "quiet", False) else args.log_level
+    logging.basicConfig(level=getattr(logging, level), format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except (ScenarioError, FileNotFoundError, ValueError) as exc:
+        print(f"crashdem {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
