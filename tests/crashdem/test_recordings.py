@@ -1,0 +1,217 @@
+"""Tests of recordings I/O and validation (crashdem.recordings).
+
+Round trips write signals generated here and read them back; the oracle is the input itself
+(bit-exact data for CSV/HDF5/ISO-MME, which all write 17 significant digits or binary float64).
+Each bad-recording problem has its own test with the message checked.
+"""
+from __future__ import annotations
+
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+from crashdem.filters import cfc_filter
+from crashdem.recordings import (
+    RecordingError,
+    detect_format,
+    read_recording,
+    validate,
+    write_recording,
+)
+from crashdem.signal import Signal
+
+#: ISO-MME rebuilds time as t0 + i*dt: a few ulp of t_end
+TIME_ATOL = 1e-15
+
+
+def _signals(fs=10_000.0, n=1200):
+    t = np.arange(n) / fs
+    acc = Signal("cg_accel_z", t, 25.0 * np.sin(2 * np.pi * 8 * t) + np.cos(300 * t), "g")
+    acc = cfc_filter(acc, cfc=60)
+    acc.meta["iso_code"] = "10VEHCCG0000ACZD"
+    force = Signal("floor_force_z", t, 2e5 * np.exp(-((t - 0.06) / 0.01) ** 2), "N")
+    pitch = Signal("pitch_angle", t, 0.3 * t, "rad", cfc=None)
+    return [acc, force, pitch]
+
+
+@pytest.mark.parametrize("fmt, name", [("csv", "rec.csv"), ("hdf5", "rec.h5"),
+                                       ("isomme", "TEST01"), ("isomme", "TEST02.zip")])
+def test_round_trip_each_format(tmp_path, fmt, name):
+    """Oracle: the written signals. Data bit-exact, time exact (ISO-MME: t0 + i dt to a few ulp),
+    units, CFC and ISO code preserved; the format is auto-detected on reading."""
+    sigs = _signals()
+    path = tmp_path / name
+    write_recording(path, sigs, format=fmt)
+    assert detect_format(path) == fmt
+    out = read_recording(path)
+    assert sorted(out) == sorted(s.name for s in sigs)
+    for s in sigs:
+        r = out[s.name]
+        np.testing.assert_array_equal(r.data, s.data)
+        np.testing.assert_allclose(r.t, s.t, rtol=0, atol=TIME_ATOL)
+        assert r.unit == s.unit
+        assert r.cfc == s.cfc
+    assert out["cg_accel_z"].meta["iso_code"] == "10VEHCCG0000ACZD"
+    if fmt == "hdf5":  # the filter method survives in HDF5 metadata
+        assert out["cg_accel_z"].meta["filter"]["padding"] == "odd"
+
+
+def test_format_from_suffix_and_channel_selection(tmp_path):
+    """write_recording infers the format from the suffix; channels= selects by name or code."""
+    sigs = _signals()
+    write_recording(tmp_path / "a.csv", sigs)
+    write_recording(tmp_path / "a.h5", sigs)
+    write_recording(tmp_path / "A01", sigs)
+    assert [detect_format(tmp_path / p) for p in ("a.csv", "a.h5", "A01")] == \
+        ["csv", "hdf5", "isomme"]
+    assert list(read_recording(tmp_path / "a.h5", channels=["pitch_angle"])) == ["pitch_angle"]
+    assert list(read_recording(tmp_path / "A01", channels=["10VEHCCG0000ACZD"])) == ["cg_accel_z"]
+    with pytest.raises(RecordingError, match=r"a\.csv: channel 'nope' not found"):
+        read_recording(tmp_path / "a.csv", channels=["nope"])
+
+
+def test_csv_header_variants(tmp_path):
+    """Header grammar variants: 'name (unit)', a second unit row, ';' with decimal commas and
+    time in ms all read to the same channels (oracle: the numbers typed in the test)."""
+    files = {
+        "paren.csv": "Time (s),accel_z (g),force (kN)\n0,1.5,2\n0.001,2.5,3\n0.002,3.5,4\n",
+        "unitrow.csv": "time,accel_z,force\n[s],[g],kN\n0,1.5,2\n0.001,2.5,3\n0.002,3.5,4\n",
+        "semicolon.csv": "time [ms];accel_z [g];force [kN]\n0;1,5;2\n1;2,5;3\n2;3,5;4\n",
+        "tab.txt": "# exported by a DAQ\ntime [s]\taccel_z [g]\tforce [kN]\n0\t1.5\t2\n"
+                   "0.001\t2.5\t3\n0.002\t3.5\t4\n",
+    }
+    for name, text in files.items():
+        (tmp_path / name).write_text(text, encoding="utf-8")
+        out = read_recording(tmp_path / name)
+        np.testing.assert_allclose(out["accel_z"].t, [0, 1e-3, 2e-3], rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(out["accel_z"].data, [1.5, 2.5, 3.5])
+        assert out["accel_z"].unit == "g" and out["force"].unit == "kN", name
+        np.testing.assert_allclose(out["force"].to_si().data, [2e3, 3e3, 4e3])
+
+
+def test_csv_channel_comment_metadata(tmp_path):
+    """'# channel: name; cfc=..; iso_code=..' lines set the filter class and ISO code."""
+    (tmp_path / "m.csv").write_text(
+        "# channel: a; cfc=180; iso_code=10VEHCCG0000ACXC\ntime [s],a [m/s^2]\n0,1\n1e-4,2\n"
+        "2e-4,3\n", encoding="utf-8")
+    s = read_recording(tmp_path / "m.csv")["a"]
+    assert s.cfc == 180.0 and s.meta["iso_code"] == "10VEHCCG0000ACXC"
+
+
+def test_read_with_cfc_filters_raw_channels(tmp_path):
+    """read_recording(..., cfc=) returns channels filtered at that class (same as cfc_filter on
+    the raw channel), with the method recorded in meta['filter']."""
+    t = np.arange(2000) / 10_000.0
+    raw = Signal("cg_accel_x", t, np.sign(np.sin(2 * np.pi * 30 * t)), "g")
+    write_recording(tmp_path / "r.h5", [raw])
+    out = read_recording(tmp_path / "r.h5", cfc=60)["cg_accel_x"]
+    assert out.cfc == 60.0 and out.meta["filter"]["cfc"] == 60.0
+    np.testing.assert_array_equal(out.data, cfc_filter(raw, cfc=60).data)
+
+
+# --------------------------------------------------------------------------- bad recordings
+
+def test_error_non_monotonic_time(tmp_path):
+    (tmp_path / "b.csv").write_text("time [s],acc [g]\n0,1\n0.002,2\n0.001,3\n0.003,4\n",
+                                    encoding="utf-8")
+    with pytest.raises(RecordingError,
+                       match=r"b\.csv: channel 'acc': time is not strictly increasing at "
+                             r"sample 2"):
+        read_recording(tmp_path / "b.csv")
+
+
+def test_error_nan_in_data(tmp_path):
+    (tmp_path / "b.csv").write_text("time [s],acc [g],f [N]\n0,1,1\n0.001,,2\n0.002,3,3\n",
+                                    encoding="utf-8")
+    with pytest.raises(RecordingError,
+                       match=r"b\.csv: channel 'acc': data contain NaN/inf: 1 samples, first at "
+                             r"sample 1 \(t=0\.001 s\)"):
+        read_recording(tmp_path / "b.csv")
+
+
+def test_error_unknown_unit(tmp_path):
+    with h5py.File(tmp_path / "b.h5", "w") as f:
+        f.attrs["format"] = "crashdem-recording"
+        g = f.create_group("acc")
+        g.create_dataset("t", data=np.arange(5) * 1e-3)
+        g.create_dataset("data", data=np.ones(5))
+        g.attrs["unit"] = "parsec/fortnight"
+    with pytest.raises(RecordingError,
+                       match=r"b\.h5: channel 'acc': unknown unit 'parsec/fortnight'"):
+        read_recording(tmp_path / "b.h5")
+
+
+def test_error_empty_channel(tmp_path):
+    (tmp_path / "b.csv").write_text("time [s],acc [g],f [N]\n0,,1\n0.001,,2\n0.002,,3\n",
+                                    encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"b\.csv: channel 'acc': empty channel"):
+        read_recording(tmp_path / "b.csv")
+
+
+def test_error_sample_rate_too_low_for_cfc(tmp_path):
+    """J211-1: fs >= 10 CFC (anchors.md section 2); 1 kHz cannot carry CFC 180."""
+    t = np.arange(500) / 1000.0
+    write_recording(tmp_path / "slow.csv", [Signal("acc", t, np.sin(t), "g")])
+    with pytest.raises(RecordingError,
+                       match=r"slow\.csv: channel 'acc': fs=1000 Hz is below the J211-1 "
+                             r"recommendation fs >= 10\*CFC = 1800 Hz for CFC 180"):
+        read_recording(tmp_path / "slow.csv", cfc=180)
+    with pytest.raises(RecordingError, match=r"'acc': fs=1000 Hz is too low for CFC 600"):
+        validate(Signal("acc", t, np.sin(t), "g"), cfc=600)
+    assert validate(Signal("acc", t, np.sin(t), "g"), cfc=60).name == "acc"
+
+
+def test_error_unknown_format_and_missing_unit(tmp_path):
+    (tmp_path / "x.bin").write_bytes(b"\x00\x01")
+    with pytest.raises(RecordingError, match=r"x\.bin: unknown recording format"):
+        read_recording(tmp_path / "x.bin")
+    (tmp_path / "nounit.csv").write_text("time [s],acc\n0,1\n0.001,2\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"nounit\.csv: channel 'acc': no unit"):
+        read_recording(tmp_path / "nounit.csv")
+
+
+def test_write_csv_needs_common_time(tmp_path):
+    a = Signal("a", np.arange(5) * 1e-3, np.ones(5), "g")
+    b = Signal("b", np.arange(5) * 2e-3, np.ones(5), "g")
+    with pytest.raises(RecordingError, match=r"'b': CSV needs one common time column"):
+        write_recording(tmp_path / "c.csv", [a, b])
+    write_recording(tmp_path / "c.h5", [a, b])  # HDF5 keeps one time vector per channel
+    assert read_recording(tmp_path / "c.h5")["b"].t[-1] == pytest.approx(8e-3)
+
+
+def test_reads_crashdem_result_layout_without_results_module(tmp_path, monkeypatch):
+    """A crashdem result file (/channels/<name>/{time,raw,filtered}) is read directly when
+    crashdem.results is unavailable (guarded import); the filtered dataset and its CFC win."""
+    monkeypatch.setitem(sys.modules, "crashdem.results", None)  # import -> ImportError
+    t = np.arange(100) * 1e-4
+    with h5py.File(tmp_path / "res.h5", "w") as f:
+        g = f.create_group("channels/cg_accel_z")
+        g.create_dataset("time", data=t)
+        g.create_dataset("raw", data=np.sin(t)).attrs["unit"] = "m/s^2"
+        d = g.create_dataset("filtered", data=np.cos(t))
+        d.attrs["unit"] = "m/s^2"
+        d.attrs["cfc"] = 60.0
+    s = read_recording(tmp_path / "res.h5")["cg_accel_z"]
+    np.testing.assert_array_equal(s.data, np.cos(t))
+    assert s.unit == "m/s^2" and s.cfc == 60.0
+
+
+def test_reads_crashdem_result_through_open_result(tmp_path):
+    """A result written by crashdem.results.ResultWriter (docs/results_schema.md) is read through
+    open_result: the filtered channel at its CFC class, unit and ISO code with filter letter."""
+    results = pytest.importorskip("crashdem.results")
+    if not hasattr(results, "ResultWriter"):
+        pytest.skip("crashdem.results has no ResultWriter")
+    t = np.arange(1000) / 1e4
+    w = results.ResultWriter(tmp_path / "run.h5")
+    w.declare_channel("cg_accel_z", "m/s^2", 10_000.0, cfc_class=60.0,
+                      iso_code="10VEHCCG0000ACZ0")
+    w.append_channel("cg_accel_z", t, np.sin(50 * t))
+    w.close()
+    s = read_recording(tmp_path / "run.h5")["cg_accel_z"]
+    assert s.unit == "m/s^2" and s.cfc == 60.0
+    assert s.meta["iso_code"] == "10VEHCCG0000ACZD"
+    raw = Signal("cg_accel_z", t, np.sin(50 * t), "m/s^2")
+    np.testing.assert_allclose(s.data, cfc_filter(raw, cfc=60).data, rtol=0, atol=1e-12)
