@@ -113,3 +113,10 @@ def test_markdown_reference_lists_every_field():
     md = sc.schema_markdown()
     for path, _ in sc._walk(sc.SCHEMA):
         assert f"`{path}`" in md
+
+
+def test_docs_scenario_reference_is_current():
+    from pathlib import Path
+
+    doc = (Path(__file__).resolve().parents[2] / "docs/scenario_reference.md").read_text()
+    assert sc.schema_markdown() in doc, "regenerate docs/scenario_reference.md with `crashdem schema`"
