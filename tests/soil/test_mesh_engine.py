@@ -1,0 +1,54 @@
+"""Integration of triangle-mesh boundaries with the DEM engine (soil.Simulation)."""
+
+import math
+
+import numpy as np
+import pytest
+
+import soil
+from soil.contact_laws import contact_duration
+from soil.mesh import TriangleMesh
+
+E = 2e7  # [Pa]
+RHO = 2650.0  # [kg/m^3]
+R = 0.05  # [m]
+# leapfrog with dt = t_c / 200: the measured contact duration is quantised by dt (+-2 dt) and
+# the symplectic energy error is O((omega dt)^2) ~ 2.5e-4
+STEPS_PER_CONTACT = 200
+RESTITUTION_TOL = 1e-3
+
+
+@pytest.mark.parametrize("foot", [(1 / 6, 1 / 6), (0.0, 0.1), (0.05, -0.02)],
+                         ids=["shared_vertex", "shared_edge", "face"])
+def test_facet_impact_is_one_linear_spring(foot):
+    """Oracle: undamped linear spring, t_c = pi sqrt(m / k_n) with the facet convention
+    k_n = 2 E r E 2r / (E r + E 2r) = 4/3 E r (Yade Ig2_Facet_Sphere_ScGeom, ARCHITECTURE 1);
+    restitution 1 (energy conservation). The impact point is a vertex shared by 6 triangles, an
+    edge shared by 2, or a face interior: one contact at every step, so the same duration."""
+    m = 4.0 / 3.0 * math.pi * R**3 * RHO
+    kn = 4.0 / 3.0 * E * R
+    t_c = contact_duration(m, kn)
+    dt = t_c / STEPS_PER_CONTACT
+    mesh = TriangleMesh.plane_patch((1.0, 1.0), (3, 3))
+    p = soil.Particles(x=[[foot[0], foot[1], R + 1e-4]], radius=[R], v=[[0.0, 0.0, -1.0]])
+    mat = soil.Material(young=E, density=RHO, friction_angle=0.0, stiffness_ratio=0.25)
+    sim = soil.Simulation(p, [mat], [soil.BoundaryBody(shapes=[mesh])], gravity=(0, 0, 0),
+                          dt=dt)
+    v_before = sim.synchronized_velocity()[0][0].copy()
+    t_start = t_end = None
+    max_contacts = 0
+    for _ in range(10 * STEPS_PER_CONTACT):
+        sim.step()
+        n_c = len(sim.contacts()["i"])
+        max_contacts = max(max_contacts, n_c)
+        if n_c and t_start is None:
+            t_start = sim.time
+        if t_start is not None and not n_c:
+            t_end = sim.time
+            break
+    assert t_start is not None and t_end is not None, "impact did not complete"
+    assert max_contacts == 1
+    assert abs((t_end - t_start) - t_c) <= 2 * dt
+    v_after = sim.synchronized_velocity()[0][0]
+    assert abs(-v_after[2] / v_before[2] - 1.0) < RESTITUTION_TOL
+    np.testing.assert_allclose(v_after[:2], 0.0, atol=1e-12)
