@@ -27,9 +27,21 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_info(args: argparse.Namespace) -> int:
+    import h5py
+
     from crashdem.results import open_result
 
-    with open_result(args.result) as res:
+    path = Path(args.result)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such result file")
+    with h5py.File(path, "r", swmr=True) as f:
+        is_ensemble = "members" in f and "channels" not in f
+    if is_ensemble:
+        from crashdem.ensemble import open_ensemble
+
+        print(open_ensemble(path).summary())
+        return 0
+    with open_result(path) as res:
         print(res.summary())
     return 0
 
@@ -93,6 +105,16 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--format", choices=["vtu", "xdmf"], default="vtu")
     e.add_argument("--out", default=None)
     e.set_defaults(func=_cmd_export)
+
+    from crashdem import ensemble
+
+    sw = sub.add_parser("sweep", help="parameter sweep fanned out over Dask, one HDF5 per ensemble")
+    ensemble.add_sweep_arguments(sw)
+    sw.set_defaults(func=ensemble.sweep_command)
+
+    ca = sub.add_parser("calibrate", help="fit scenario parameters to a recording channel on Dask")
+    ensemble.add_calibrate_arguments(ca)
+    ca.set_defaults(func=ensemble.calibrate_command)
 
     d = sub.add_parser("diagnose", help="locate a simulation-recording mismatch and name the missing physics")
     d.add_argument("--scenario", required=True)

@@ -349,7 +349,10 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
                       default_cfc=scen["instrumentation.cfc"]) as w:
         w.declare_sensors(m.sensors)
         if snap_times:
+            from crashdem.export import declare_body_surface, write_body_pose
+
             w.declare_snapshots(m.sim.particles.radius)
+            declare_body_surface(w, "drop_mass", m.spec.vertices, m.spec.triangles)
         m.cosim.update_ledger()
         w.declare_energy(list(_ledger_dict(m.cosim.ledger)))
         state = {"steps": 0, "snap": 0}
@@ -364,6 +367,8 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
                 w.append_energy(t, _ledger_dict(e))
             while state["snap"] < len(snap_times) and t >= snap_times[state["snap"]] - 0.5 * sim.dt:
                 w.write_snapshot(t, sim.particles.x)
+                b = sim.boundaries[m.body_index]
+                write_body_pose(w, "drop_mass", b.position, b.rotation)
                 state["snap"] += 1
             bar.update(t, state["steps"])
 
