@@ -55,8 +55,11 @@ class Model:
     surface_z: float  # free-surface height under the impactor [m]
     t_contact: float  # expected time of first contact [s]
     t_end: float  # end of the run [s]
-    boundary_names: dict[str, int] = field(default_factory=dict)
-    floor_body: int = 0
+    boundary_names: dict[str, int] = field(default_factory=dict)  # load-cell boundaries
+    body_name: str = "drop_mass"  # sensor name of the coupled body
+    extra: dict[str, Any] = field(default_factory=dict)  # scenario-specific objects
+    #: called once per DEM step before the sensors record (e.g. compliant walls), or None
+    pre_record: Any = None
 
 
 def _deg(x: float) -> float:
@@ -243,9 +246,12 @@ def build_model(scen: Scenario, cache_dir: str | os.PathLike, progress=None) -> 
     import soil
     from soil import packing as pk
 
-    if scen["scenario.kind"] != "drop_test":
-        raise ScenarioError(f"scenario.kind={scen['scenario.kind']!r}: only 'drop_test' runs in this "
-                            "version")
+    if scen["scenario.kind"] == "glider_crash":
+        try:
+            from crashdem.glider import build_glider_model
+        except ImportError:  # pragma: no cover - the glider module ships with the package
+            raise ScenarioError("scenario.kind='glider_crash': crashdem.glider is missing") from None
+        return build_glider_model(scen, cache_dir, progress=progress)
     if scen["physics.structural_crush.enabled"]:
         raise ScenarioError("physics.structural_crush.enabled=true: needs a crushable-nose body "
                             "(glider); the drop sphere is rigid by definition")
@@ -282,13 +288,13 @@ def build_model(scen: Scenario, cache_dir: str | os.PathLike, progress=None) -> 
     t_contact = gap / max(v, 1e-9)
     sensors = _sensor_set(scen, spec, "tank", "drop_mass")
     return Model(scen, sim, 1, spec, model, cosim, sensors, packing, surface, t_contact,
-                 t_contact + scen["solver.t_end"], {"tank": 0, "drop_mass": 1}, 0)
+                 t_contact + scen["solver.t_end"], {"tank": 0}, "drop_mass")
 
 
-def _boundary_contacts(sim, body: int):
+def _boundary_contacts(contacts: dict, body: int):
     from crashdem.sensors import BoundaryContacts
 
-    return BoundaryContacts.from_contacts(sim.contacts(), body)
+    return BoundaryContacts.from_contacts(contacts, body)
 
 
 def _body_state(cosim):
@@ -352,14 +358,18 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
             from crashdem.export import declare_body_surface, write_body_pose
 
             w.declare_snapshots(m.sim.particles.radius)
-            declare_body_surface(w, "drop_mass", m.spec.vertices, m.spec.triangles)
+            declare_body_surface(w, m.body_name, m.spec.vertices, m.spec.triangles)
         m.cosim.update_ledger()
         w.declare_energy(list(_ledger_dict(m.cosim.ledger)))
         state = {"steps": 0, "snap": 0}
 
         def record(t, sim, model):
-            m.sensors.record(t, {"drop_mass": _body_state(m.cosim)},
-                             {"tank": _boundary_contacts(sim, m.floor_body)})
+            if m.pre_record is not None:
+                m.pre_record(t, sim, model)
+            contacts = sim.contacts() if m.boundary_names else None
+            m.sensors.record(t, {m.body_name: _body_state(m.cosim)},
+                             {name: _boundary_contacts(contacts, idx)
+                              for name, idx in m.boundary_names.items()})
             state["steps"] += 1
             if state["steps"] % 10 == 0:
                 w.append_sensors(m.sensors)
@@ -368,7 +378,7 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
             while state["snap"] < len(snap_times) and t >= snap_times[state["snap"]] - 0.5 * sim.dt:
                 w.write_snapshot(t, sim.particles.x)
                 b = sim.boundaries[m.body_index]
-                write_body_pose(w, "drop_mass", b.position, b.rotation)
+                write_body_pose(w, m.body_name, b.position, b.rotation)
                 state["snap"] += 1
             bar.update(t, state["steps"])
 

@@ -183,6 +183,18 @@ SCHEMA: dict[str, Any] = {
         "wall_young": F(None, "Pa", 0, None, lo_open=True, doc="wall Young's modulus (null = soil value, i.e. Yade's default wall)", nullable=True),
         "slope_deg": F(0.0, "deg", 0, 60, doc="inclination of the free surface (glider container: 45)"),
         "compaction": C("horizontal", "horizontal", "slope_normal", doc="direction the layers were compacted in"),
+        "height": F(2.0, "m", 0.3, 10.0, doc="box container wall height"),
+        "wall_thickness": F(0.03, "m", 0.001, 0.5, doc="container wall panel thickness (glider container: 30 mm poplar plywood)"),
+    },
+    "glider": {
+        "release_speed": F(18.33, "m/s", 0, 100, lo_open=True, doc="horizontal speed at release from the sled (thesis: 18.33 m/s)"),
+        "impact_height": F(0.85, "m", 0, 10, doc="height above the container floor of the point where the nose meets the slope"),
+        "free_flight_time": F(0.05, "s", 0, 2, doc="free flight between release and first contact"),
+        "cg_from_nose": F(None, "m", 0, 10, lo_open=True, doc="override: CG distance behind the nose", nullable=True),
+        "cg_height": F(None, "m", -2, 2, doc="override: CG height above the fuselage floor line", nullable=True),
+        "pitch_inertia": F(None, "kg*m^2", 0, None, lo_open=True, doc="override: pitch moment of inertia about the CG", nullable=True),
+        "mesh": S("", doc="fuselage surface mesh file (STL/OBJ/VTU...); empty = parametric mesh"),
+        "mesh_scale": F(1.0, "1", 0, None, lo_open=True, doc="scale of the mesh file's units to m (1e-3 for mm)"),
     },
     "impactor": {
         "body": C("drop_sphere", "drop_sphere", "glider", doc="the rigid impactor"),
@@ -242,6 +254,7 @@ SCHEMA: dict[str, Any] = {
         "sample_rate": F(12500.0, "Hz", 100, 1e6, doc="acquisition rate (reference tests: 12.5 kHz)"),
         "cfc": F(60.0, "Hz", 1, 10000, doc="SAE J211 channel frequency class applied to stored filtered channels"),
         "accel_full_scale_g": F(200.0, "g", 1, 1e5, doc="accelerometer full scale (drop mass: 200 g; glider: 250 g)"),
+        "accel_failure_factor": F(None, "1", 1, 100, doc="an accelerometer fails (NaN afterwards) beyond this multiple of its full scale (null = never)", nullable=True),
     },
     "solver": {
         "dt": F(None, "s", 0, 1e-2, lo_open=True, doc="DEM time step (null = safety x critical step)", nullable=True),
