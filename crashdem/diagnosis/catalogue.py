@@ -1,0 +1,307 @@
+"""The catalogue of candidate missing physics (names fixed by issue 7) and the recalibration
+pseudo-hypothesis.
+
+Each :class:`Hypothesis` states the physics, its parameters (SI units, bounds, prior nominal value,
+log/linear search scale), the ROM fields they set (``crashdem.diagnosis.rom.RomParams``) and how
+the effect is switched on in a scenario (``physics.<name>.*`` keys of ``crashdem.scenario``).
+
+Every hypothesis is fitted *together with* the recalibration parameters, so a missing-physics
+hypothesis only wins when its extra terms explain what a refit of the existing parameters
+cannot (nested models; see ``fit.py``).
+
+Notes
+-----
+Physics sources per entry are in each ``physics`` text; the ROM terms are documented in
+``rom.py``. The rolling-resistance mapping ``friction_ratio(mu_r)`` is a ROM assumption (an
+exponential saturation towards the blocked-rotation strength, after the trend reported by
+Estrada, Taboada & Radjai 2008, PRE 78:021301) to be calibrated against DEM runs.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+__all__ = ["ParameterSpec", "Hypothesis", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
+           "friction_ratio_from_rolling", "rolling_from_friction_ratio"]
+
+#: friction ratio with free rotation and no rolling resistance (mu_r = 0) [-] (ROM assumption)
+FREE_ROTATION_RATIO = 0.45
+#: rolling-resistance scale of the saturation [-] (ROM assumption)
+ROLLING_SCALE = 0.08
+
+
+def friction_ratio_from_rolling(mu_r: float) -> float:
+    """Residual friction ratio r (free / blocked rotation) for a rolling coefficient mu_r [-]."""
+    return FREE_ROTATION_RATIO + (1.0 - FREE_ROTATION_RATIO) * -math.expm1(-mu_r / ROLLING_SCALE)
+
+
+def rolling_from_friction_ratio(r: float) -> float:
+    """Inverse of ``friction_ratio_from_rolling`` (clipped to [0, 1])."""
+    if r <= FREE_ROTATION_RATIO:
+        return 0.0
+    if r >= 1.0:
+        return 1.0
+    return float(min(1.0, -ROLLING_SCALE * math.log((1.0 - r) / (1.0 - FREE_ROTATION_RATIO))))
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One fitted parameter: ``name`` is the ROM field (or recalibration scale key)."""
+
+    name: str
+    unit: str
+    lo: float
+    hi: float
+    nominal: float  # prior / starting value
+    scale: str = "lin"  # "lin" or "log" search scale
+    description: str = ""
+    scenario_key: str | None = None
+    off: float | None = None  # value at which the effect vanishes (nests the recalibration)
+    grid: int | None = None  # coarse-grid levels for the multi-start (None = from the budget)
+
+    def __post_init__(self) -> None:
+        if not self.lo < self.hi:
+            raise ValueError(f"ParameterSpec.{self.name}: lo={self.lo!r} must be < hi={self.hi!r} [{self.unit}]")
+        if not self.lo <= self.nominal <= self.hi:
+            raise ValueError(f"ParameterSpec.{self.name}.nominal={self.nominal!r}: must be in "
+                             f"[{self.lo:g}, {self.hi:g}] [{self.unit}]")
+        if self.off is not None and not self.lo <= self.off <= self.hi:
+            raise ValueError(f"ParameterSpec.{self.name}.off={self.off!r}: must be in "
+                             f"[{self.lo:g}, {self.hi:g}] [{self.unit}]")
+        if self.scale not in ("lin", "log"):
+            raise ValueError(f"ParameterSpec.{self.name}.scale={self.scale!r}: must be 'lin' or 'log'")
+        if self.scale == "log" and self.lo <= 0:
+            raise ValueError(f"ParameterSpec.{self.name}.lo={self.lo!r}: must be > 0 for a log scale [{self.unit}]")
+
+    def to_unit(self, value: float) -> float:
+        """Map a physical value into the search coordinate u in [0, 1]."""
+        if self.scale == "log":
+            return (math.log(value) - math.log(self.lo)) / (math.log(self.hi) - math.log(self.lo))
+        return (value - self.lo) / (self.hi - self.lo)
+
+    def from_unit(self, u: float) -> float:
+        """Physical value of the search coordinate u (clipped to [0, 1])."""
+        u = min(1.0, max(0.0, float(u)))
+        if self.scale == "log":
+            return math.exp(math.log(self.lo) + u * (math.log(self.hi) - math.log(self.lo)))
+        return self.lo + u * (self.hi - self.lo)
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """A candidate explanation: physics text, parameters and scenario switch."""
+
+    name: str
+    physics: str
+    parameters: tuple[ParameterSpec, ...]
+    scenario_switch: str | None
+    signature: tuple[str, ...] = ()
+    to_scenario: Callable[[dict[str, float]], dict[str, Any]] | None = field(default=None, compare=False)
+
+    @property
+    def n_params(self) -> int:
+        """Number of the hypothesis's own parameters."""
+        return len(self.parameters)
+
+    def scenario_overrides(self, values: dict[str, float]) -> dict[str, Any]:
+        """Scenario keys that switch this effect on with the fitted ``values``."""
+        out: dict[str, Any] = {}
+        if self.scenario_switch:
+            out[self.scenario_switch] = True
+        if self.to_scenario is not None:
+            out.update(self.to_scenario(values))
+        else:
+            for p in self.parameters:
+                if p.scenario_key and p.name in values:
+                    out[p.scenario_key] = float(values[p.name])
+        return out
+
+    def describe(self) -> dict[str, Any]:
+        """JSON-ready description (physics, parameters with units/ranges, scenario keys)."""
+        return {
+            "name": self.name,
+            "physics": self.physics,
+            "scenario_switch": self.scenario_switch,
+            "signature": list(self.signature),
+            "parameters": [
+                {"name": p.name, "unit": p.unit, "range": [p.lo, p.hi], "nominal": p.nominal,
+                 "scale": p.scale, "scenario_key": p.scenario_key, "description": p.description}
+                for p in self.parameters
+            ],
+        }
+
+
+def _rotation_to_scenario(v: dict[str, float]) -> dict[str, Any]:
+    mu = rolling_from_friction_ratio(v["friction_ratio"])
+    return {"soil.rotation": "free", "soil.rolling_coefficient": mu,
+            "physics.particle_rotation.rolling_coefficient": mu}
+
+
+def _recal_to_scenario(v: dict[str, float]) -> dict[str, Any]:
+    # scale factors; the caller multiplies the scenario's own values (see docs/diagnosis.md)
+    return {f"calibration.{k}": float(x) for k, x in v.items()}
+
+
+RECALIBRATION = Hypothesis(
+    name="recalibration",
+    physics=("No new physics: the existing soil parameters are wrong. Refits the strength "
+             "(friction) scale, the inertial-drag scale and the stiffness scale of the baseline "
+             "model (Poncelet / Katsuragi-Durian resistance, anchors.md section 6)."),
+    parameters=(
+        ParameterSpec("strength_scale", "1", 0.3, 3.0, 1.0, "log",
+                      "multiplies the frictional resistance q0 + k_p z (DEM: tan of the friction angle)",
+                      "soil.material.friction_angle_deg"),
+        ParameterSpec("drag_scale", "1", 0.3, 3.0, 1.0, "log",
+                      "multiplies the inertial drag coefficient (DEM: bulk density)",
+                      "soil.material.density"),
+        ParameterSpec("stiffness_scale", "1", 0.3, 3.0, 1.0, "log",
+                      "multiplies the soil modulus (DEM: Young's modulus of the grains)",
+                      "soil.material.young"),
+    ),
+    scenario_switch=None,
+    signature=("peak_too_high", "peak_too_low", "duration_too_long", "duration_too_short"),
+    to_scenario=_recal_to_scenario,
+)
+
+CATALOGUE: tuple[Hypothesis, ...] = (
+    Hypothesis(
+        "soil_layering",
+        ("A density/stiffness discontinuity at depth z_d (e.g. a compacted deep layer under a "
+         "remoulded top layer, thesis section 2.1.2): resistance and stiffness jump by a ratio "
+         "when the impactor reaches it, giving a second deceleration peak."),
+        (ParameterSpec("interface_depth", "m", 0.03, 1.5, 0.3, "lin",
+                       "depth of the discontinuity below the free surface", "physics.soil_layering.depth",
+                       grid=16),
+         ParameterSpec("strength_ratio", "1", 0.3, 5.0, 2.0, "log",
+                       "lower/upper resistance and stiffness ratio",
+                       "physics.soil_layering.lower_young_factor", off=1.0, grid=4)),
+        "physics.soil_layering.enabled",
+        ("missing_peak", "peak_too_low", "extra_peak"),
+    ),
+    Hypothesis(
+        "boundary_proximity",
+        ("A rigid floor (or wall) nearer than modelled, or of a different compliance: the stress "
+         "bulb reaches it and stiffens the response (elastic layer on a rigid base, ~a/h), and "
+         "the compression wave reflected by it returns at 2H/c as an extra lift (thesis "
+         "section 2.1.2; Chrono issue #824 on truncated soil domains, anchors.md section 5)."),
+        (ParameterSpec("floor_depth", "m", 0.4, 3.0, 1.2, "lin",
+                       "soil thickness above the rigid floor", "physics.boundary_proximity.floor_depth",
+                       off=2.0, grid=16),
+         ParameterSpec("wave_reflection", "1", 0.0, 1.0, 0.5, "lin",
+                       "reflection coefficient of the floor/wall (1 = rigid, lower = compliant)",
+                       None, off=0.5, grid=1)),
+        "physics.boundary_proximity.enabled",
+        ("extra_peak", "missing_peak", "peak_early", "peak_too_low"),
+    ),
+    Hypothesis(
+        "cohesion",
+        ("Adhesion between grains (moisture, fines): a bulk cohesion c adds N_c c to the bearing "
+         "pressure (N_c = 9, deep circular footing, Skempton 1951) and resists separation "
+         "(tension down to -c A) on rebound."),
+        (ParameterSpec("cohesion", "Pa", 1.0e3, 3.0e5, 2.0e4, "log",
+                       "bulk cohesion (ROM); DEM contact normal/shear strength to be calibrated",
+                       "physics.cohesion.normal_strength", off=1.0e3),),
+        "physics.cohesion.enabled",
+        ("peak_too_low", "rebound_too_strong", "force_too_low"),
+        to_scenario=lambda v: {"physics.cohesion.normal_strength": float(v["cohesion"]),
+                               "physics.cohesion.shear_strength": float(v["cohesion"])},
+    ),
+    Hypothesis(
+        "particle_rotation",
+        ("Free particle rotation with rolling resistance instead of blocked rotation: the grains "
+         "roll past the impactor, the mobilised friction softens from the interlocked value to a "
+         "residual fraction r over a mobilisation depth delta (lower, longer pulse)."),
+        (ParameterSpec("friction_ratio", "1", 0.2, 1.0, 0.6, "lin",
+                       "residual / blocked-rotation friction (maps to the rolling coefficient)",
+                       "physics.particle_rotation.rolling_coefficient", off=1.0),
+         ParameterSpec("mobilisation_depth", "m", 0.01, 0.5, 0.08, "log",
+                       "penetration over which the friction softens", None)),
+        "physics.particle_rotation.enabled",
+        ("peak_too_high", "duration_too_short", "peak_early"),
+        to_scenario=_rotation_to_scenario,
+    ),
+    Hypothesis(
+        "contact_damping",
+        ("Energy dissipated in the contacts (viscous normal damping from a restitution "
+         "coefficient): a dashpot in parallel with the soil spring lowers the stored elastic "
+         "energy and the rebound."),
+        (ParameterSpec("restitution", "1", 0.05, 1.0, 0.5, "lin",
+                       "coefficient of restitution", "physics.contact_damping.restitution",
+                       off=1.0),),
+        "physics.contact_damping.enabled",
+        ("rebound_too_strong",),
+    ),
+    Hypothesis(
+        "sensor_dynamics",
+        ("The measured acceleration is seen through the accelerometer mount: a base-excitation "
+         "resonance fn with damping ratio zeta (Thomson & Dahl, section 3.5), ringing and "
+         "overshoot in the recorded channel."),
+        (ParameterSpec("mount_frequency", "Hz", 20.0, 1000.0, 120.0, "log",
+                       "mount natural frequency", "physics.sensor_dynamics.natural_frequency",
+                       off=1000.0),
+         ParameterSpec("mount_damping", "1", 0.02, 1.0, 0.15, "log",
+                       "mount damping ratio", "physics.sensor_dynamics.damping_ratio")),
+        "physics.sensor_dynamics.enabled",
+        ("oscillation", "peak_too_low", "extra_peak", "missing_peak"),
+    ),
+    Hypothesis(
+        "structural_crush",
+        ("The impactor is not rigid: a crushable nose (force-limited series element of crush "
+         "strength F_c over a stroke s_max between the soil and the body) clips the "
+         "deceleration to a plateau F_c/m until the stroke is used up."),
+        (ParameterSpec("crush_strength", "N", 2.0e4, 2.0e6, 2.0e5, "log",
+                       "crush force plateau", "physics.structural_crush.crush_force", off=2.0e6,
+                       grid=8),
+         ParameterSpec("crush_stroke", "m", 0.01, 0.6, 0.1, "lin",
+                       "available crush stroke", "physics.structural_crush.stroke", grid=10)),
+        "physics.structural_crush.enabled",
+        ("peak_too_high", "peak_early", "duration_too_short"),
+    ),
+    Hypothesis(
+        "initial_conditions",
+        ("The impact differed from the modelled one: an offset of the impact speed (drop-height "
+         "error, air drag, release), of the path angle or of the attitude."),
+        (ParameterSpec("speed_offset", "m/s", -5.0, 5.0, 0.0, "lin",
+                       "added to the impact speed", "physics.initial_conditions.velocity_offset",
+                       off=0.0),),
+        "physics.initial_conditions.enabled",
+        ("initial_offset", "peak_too_high", "peak_too_low"),
+    ),
+)
+
+NAMES: tuple[str, ...] = tuple(h.name for h in CATALOGUE)
+
+
+def combine(*names: str) -> Hypothesis:
+    """Several catalogue effects switched on together (name ``"a+b"``)."""
+    hs = [get(n) for n in names]
+    params: list[ParameterSpec] = []
+    for h in hs:
+        params += [p for p in h.parameters if p.name not in {q.name for q in params}]
+
+    def to_scen(v: dict[str, float]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for h in hs:
+            out.update(h.scenario_overrides(v))
+        return out
+
+    return Hypothesis("+".join(names), " AND ".join(h.physics for h in hs), tuple(params), None,
+                      tuple(sig for h in hs for sig in h.signature), to_scenario=to_scen)
+
+
+def get(name: str) -> Hypothesis:
+    """The catalogue entry (or the recalibration pseudo-hypothesis) called ``name``; ``"a+b"``
+    is the combination of entries a and b (``combine``)."""
+    if name == RECALIBRATION.name:
+        return RECALIBRATION
+    if "+" in name:
+        return combine(*name.split("+"))
+    for h in CATALOGUE:
+        if h.name == name:
+            return h
+    import difflib
+
+    close = difflib.get_close_matches(name, [*NAMES, RECALIBRATION.name], n=3)
+    raise ValueError(f"hypothesis {name!r}: unknown; known: {[*NAMES, RECALIBRATION.name]}"
+                     + (f"; did you mean {close}?" if close else ""))

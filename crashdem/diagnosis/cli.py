@@ -1,0 +1,174 @@
+"""``crashdem diagnose --scenario S.toml --recording REC [--channel NAME[:ROMCHANNEL] ...] --out DIR``.
+
+The baseline is the scenario's full result when it exists (``crashdem.run.default_output``,
+holding the diagnosed channels; the ROM is then first calibrated to it), else the scenario's
+reduced-order model (``rom_from_scenario``); the screening fits
+every catalogue hypothesis to the recording and writes ``DIR/report.json``, ``DIR/report.md``
+and overlay PNGs. With ``--full-confirm N`` the top hypotheses are re-run with the full DEM
+(``crashdem.run.run_scenario`` with the hypothesis's ``physics.*`` overrides; at most N+1 runs).
+
+A recorded channel is matched to a ROM channel (``accel_z``: specific force along +z of the
+impactor [m/s^2]; ``velocity_z`` [m/s]) by name, or explicitly with ``NAME:accel_z``.
+"""
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+from typing import Any
+
+from crashdem.diagnosis.rom import ACCEL, VELOCITY, RomParams, RomSettings, simulate
+from crashdem.signal import Signal
+
+__all__ = ["diagnose_command", "rom_from_scenario", "DROP_SPHERE_RADIUS", "DROP_SPHERE_MASS"]
+
+#: the PoliMi drop mass (anchors.md section 1.1, architecture: bodies.drop_sphere)
+DROP_SPHERE_MASS = 850.0
+DROP_SPHERE_RADIUS = 0.45
+
+
+def rom_from_scenario(scen) -> RomParams:
+    """ROM parameters of a ``drop_test`` scenario (impactor, impact speed, soil depth and every
+    enabled ``physics.*`` switch that the ROM represents).
+
+    Raises
+    ------
+    ValueError for scenario kinds the ROM does not represent yet (the planar glider impactor).
+    """
+    if scen.get("scenario.kind") != "drop_test" or scen.get("impactor.body") != "drop_sphere":
+        raise ValueError("diagnose: the reduced-order model covers the sphere drop test only "
+                         f"(scenario.kind={scen.get('scenario.kind')!r}, "
+                         f"impactor.body={scen.get('impactor.body')!r}); the planar glider ROM "
+                         "is not implemented yet")
+    mass = scen.get("impactor.mass") or DROP_SPHERE_MASS
+    v = scen.get("impactor.impact_velocity")
+    if v is None:
+        v = math.sqrt(2.0 * 9.81 * scen.get("impactor.drop_height"))
+    vals: dict[str, Any] = {"mass": mass, "radius": DROP_SPHERE_RADIUS, "impact_speed": v,
+                            "floor_depth": scen.get("container.soil_depth")}
+    g = lambda k: scen.get(f"physics.{k}")  # noqa: E731
+    if g("soil_layering.enabled"):
+        vals["interface_depth"] = g("soil_layering.depth")
+        vals["strength_ratio"] = g("soil_layering.lower_young_factor")
+    if g("boundary_proximity.enabled") and g("boundary_proximity.floor_depth") is not None:
+        vals["floor_depth"] = g("boundary_proximity.floor_depth")
+    if g("cohesion.enabled"):
+        vals["cohesion"] = g("cohesion.normal_strength")
+    if g("particle_rotation.enabled"):
+        from crashdem.diagnosis.catalogue import friction_ratio_from_rolling
+
+        vals["friction_ratio"] = friction_ratio_from_rolling(g("particle_rotation.rolling_coefficient"))
+    if g("contact_damping.enabled"):
+        vals["restitution"] = g("contact_damping.restitution")
+    if g("sensor_dynamics.enabled"):
+        vals["mount_frequency"] = g("sensor_dynamics.natural_frequency")
+        vals["mount_damping"] = g("sensor_dynamics.damping_ratio")
+    if g("structural_crush.enabled"):
+        vals["crush_strength"] = g("structural_crush.crush_force")
+        vals["crush_stroke"] = g("structural_crush.stroke")
+    if g("initial_conditions.enabled"):
+        vals["speed_offset"] = g("initial_conditions.velocity_offset")
+    return RomParams(**vals)
+
+
+def _channel_map(specs: list[str] | None, rec: dict[str, Signal]) -> dict[str, str]:
+    """recorded name -> ROM channel name."""
+    out: dict[str, str] = {}
+    if not specs:
+        for name in rec:
+            if name in (ACCEL, VELOCITY):
+                out[name] = name
+        if not out:
+            raise ValueError(f"diagnose: no recorded channel named {ACCEL!r} or {VELOCITY!r}; "
+                             f"recorded: {sorted(rec)}; map one with --channel NAME:{ACCEL}")
+        return out
+    for spec in specs:
+        name, _, rom_name = spec.partition(":")
+        rom_name = rom_name or name
+        if name not in rec:
+            raise ValueError(f"--channel {spec!r}: {name!r} not in the recording ({sorted(rec)})")
+        if rom_name not in (ACCEL, VELOCITY):
+            raise ValueError(f"--channel {spec!r}: model channel {rom_name!r} must be {ACCEL!r} or {VELOCITY!r}")
+        out[name] = rom_name
+    return out
+
+
+def diagnose_command(args: argparse.Namespace) -> int:
+    """Entry point used by ``crashdem.cli`` (``crashdem diagnose ...``)."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis import diagnose, screen_then_confirm, write_report
+    from crashdem.recordings import read_recording
+
+    overrides = dict(sc.parse_override(s) for s in (getattr(args, "set", None) or []))
+    scen = sc.load(args.scenario, overrides)
+    raw = read_recording(args.recording)
+    cmap = _channel_map(getattr(args, "channel", None), raw)
+    rec = {rom_name: Signal(rom_name, raw[name].t, raw[name].data, raw[name].unit, raw[name].cfc,
+                            {**raw[name].meta, "recorded_name": name})
+           for name, rom_name in cmap.items()}
+    # primary channel first (acceleration when present)
+    rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != ACCEL))
+    first = next(iter(rec.values()))
+    base_params = rom_from_scenario(scen)
+    settings = RomSettings(t_pre=max(0.0, -float(first.t[0])) + 0.005,
+                           t_end=float(first.t[-1]) + 0.01, sample_rate=first.fs,
+                           cfc=first.cfc if first.cfc is not None else scen.get("instrumentation.cfc"))
+    baseline, source = _baseline(scen, cmap, base_params, settings)
+    n_full = getattr(args, "full_confirm", None)
+    if n_full:
+        from crashdem.recordings import read_recording as _read
+        from crashdem.run import run_scenario
+
+        def full(ov: dict[str, Any]) -> dict[str, Signal]:
+            scale_keys = {k: v for k, v in ov.items() if k.startswith("calibration.")}
+            keys = {k: v for k, v in ov.items() if not k.startswith("calibration.")}
+            s2 = scen.with_overrides(_apply_scales(scen, scale_keys) | keys)
+            path = run_scenario(s2, out_dir=Path(args.out) / "full_runs", progress=False)
+            res = _read(path)
+            return {cmap_name: res[name] for name, cmap_name in cmap.items() if name in res}
+
+        rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
+                                  rom_base=base_params, calibrate_to_baseline=source != "rom")
+    else:
+        rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom")
+    rep.simulations["baseline_source"] = source
+    paths = write_report(rep, args.out)
+    print(paths["json"])
+    print(paths["md"])
+    for p in paths["plots"]:
+        print(p)
+    return 0
+
+
+def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSettings
+              ) -> tuple[dict[str, Signal], str]:
+    """The scenario's own full result (``crashdem.run.default_output``) when it exists and holds
+    the diagnosed channels, else the scenario's ROM."""
+    try:
+        from crashdem.recordings import read_recording
+        from crashdem.run import default_output
+
+        path = default_output(scen, None)
+        if path.exists():
+            res = read_recording(path)
+            if all(name in res for name in cmap):
+                return ({rom_name: res[name] for name, rom_name in cmap.items()},
+                        f"full result {path}")
+    except (ImportError, ValueError, OSError):
+        pass
+    return simulate(rom_params, settings), "rom"
+
+
+def _apply_scales(scen, scales: dict[str, float]) -> dict[str, Any]:
+    """Turn ``calibration.*_scale`` factors into absolute scenario values."""
+    out: dict[str, Any] = {}
+    for key, f in scales.items():
+        name = key.split(".", 1)[1]
+        if name == "stiffness_scale":
+            out["soil.material.young"] = scen.get("soil.material.young") * f
+        elif name == "strength_scale":
+            phi = math.radians(scen.get("soil.material.friction_angle_deg"))
+            out["soil.material.friction_angle_deg"] = math.degrees(math.atan(min(50.0, f * math.tan(phi))))
+        elif name == "drag_scale":
+            out["soil.material.density"] = scen.get("soil.material.density") * f
+    return out

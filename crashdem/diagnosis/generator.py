@@ -1,0 +1,164 @@
+"""Concealed-effect recordings for testing the diagnosis.
+
+A "truth" model with one catalogue effect drawn from a seed (hidden from the diagnosis) is run
+with numerics that differ from the diagnosing ROM -- explicit midpoint (RK2) instead of
+semi-implicit Euler, a 4x smaller step (5 us), the mount resonance discretised with a
+first-order hold instead of Tustin, and an integrating (block-averaging) acquisition instead of
+point sampling -- then acquired like a lab channel: 12.5 kHz, white sensor noise, a trigger
+offset, SAE J211 CFC 60. The lead will add a full-DEM truth (other packing seed, particle size
+and time step) behind the same ``ConcealedCase`` type.
+
+Notes
+-----
+Acquisition: 12.5 kHz and CFC 60 as in the PoliMi drop tests (scenario defaults, thesis ch. 2);
+J211 filter, anchors.md section 2.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from crashdem.diagnosis import _dsp
+from crashdem.diagnosis.rom import (ACCEL, VELOCITY, RomParams, RomSettings, run_raw,
+                                    sample_grid)
+from crashdem.signal import Signal
+
+__all__ = ["ConcealedCase", "EFFECT_DRAWS", "TRUTH_DT", "acquire", "concealed_case", "draw_effect"]
+
+#: truth integration step [s] (diagnosing ROM: 2e-5 s)
+TRUTH_DT = 5.0e-6
+#: raw (pre-filter) white noise of the acquisition, per channel, in SI:
+#: 0.5 g on a 200 g accelerometer channel; 0.05 m/s on a video-tracked velocity
+RAW_NOISE = {ACCEL: 0.5 * 9.80665, VELOCITY: 0.05}
+#: pre-trigger record [s]: a quiet free-fall segment for the noise estimate (lab practice)
+PRE_TRIGGER = 0.08
+#: trigger offset drawn uniformly in +-TRIGGER_JITTER [s]
+TRIGGER_JITTER = 0.002
+
+#: effect -> {ROM field: (low, high, "lin"|"log")} drawn for concealed recordings; ranges chosen
+#: so the effect is visible above the noise (the diagnosis must find it) but not absurd
+EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
+    "soil_layering": {"interface_depth": (0.12, 0.25, "lin"), "strength_ratio": (1.8, 3.0, "log")},
+    "boundary_proximity": {"floor_depth": (0.7, 1.2, "lin")},
+    "cohesion": {"cohesion": (3.0e4, 8.0e4, "log")},
+    "particle_rotation": {"friction_ratio": (0.4, 0.6, "lin"), "mobilisation_depth": (0.05, 0.15, "log")},
+    "contact_damping": {"restitution": (0.05, 0.2, "lin")},
+    "sensor_dynamics": {"mount_frequency": (40.0, 90.0, "log"), "mount_damping": (0.05, 0.15, "lin")},
+    "structural_crush": {"crush_strength": (1.5e5, 3.0e5, "log"), "crush_stroke": (0.08, 0.2, "lin")},
+    "initial_conditions": {"speed_offset": (2.5, 4.0, "lin")},  # sign drawn separately
+}
+
+
+@dataclass(frozen=True)
+class ConcealedCase:
+    """A generated recording and its hidden truth.
+
+    effect : the concealed catalogue effect (None for a null case)
+    values : the effect's true parameters (ROM fields)
+    recalibration : true recalibration scale factors (``rom.SCALE_KEYS``) applied to the truth
+    recording : the acquired channels
+    truth : the full truth parameter set
+    """
+
+    effect: str | None
+    values: dict[str, float]
+    recalibration: dict[str, float]
+    seed: int
+    recording: dict[str, Signal]
+    truth: RomParams
+    trigger_offset_s: float = 0.0
+    meta: dict[str, float] = field(default_factory=dict)
+
+
+def draw_effect(effect: str, rng: np.random.Generator) -> dict[str, float]:
+    """Draw the parameters of ``effect`` from ``EFFECT_DRAWS``."""
+    if effect not in EFFECT_DRAWS:
+        raise ValueError(f"effect={effect!r}: unknown; known: {sorted(EFFECT_DRAWS)}")
+    out = {}
+    for name, (lo, hi, scale) in EFFECT_DRAWS[effect].items():
+        u = rng.uniform()
+        out[name] = (math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))) if scale == "log"
+                     else lo + u * (hi - lo))
+    if effect == "initial_conditions" and rng.uniform() < 0.5:
+        out["speed_offset"] = -out["speed_offset"]
+    return out
+
+
+def acquire(truth: RomParams, rng: np.random.Generator, *, sample_rate: float = 12500.0,
+            cfc: float = 60.0, t_pre: float = PRE_TRIGGER, t_end: float = 0.15,
+            trigger_offset: float = 0.0, noise: dict[str, float] | None = None
+            ) -> dict[str, Signal]:
+    """Run the truth numerics and acquire ``accel_z`` and ``velocity_z`` like a lab.
+
+    Parameters
+    ----------
+    truth : model parameters of the truth
+    rng : random generator for the sensor noise
+    sample_rate : [Hz]; cfc : channel frequency class [Hz]; t_pre, t_end : record span [s]
+    trigger_offset : added to the recorded time axis [s] (trigger not exactly at contact)
+    noise : raw white-noise sigma per channel (SI); default ``RAW_NOISE``
+    """
+    noise = RAW_NOISE if noise is None else noise
+    settings = RomSettings(dt=TRUTH_DT, t_pre=t_pre, t_end=t_end + 0.01, sample_rate=sample_rate,
+                           cfc=None, method="midpoint")
+    t_raw, acc, vel, dep = run_raw(truth, settings)
+    ts = sample_grid(RomSettings(dt=TRUTH_DT, t_pre=t_pre, t_end=t_end, sample_rate=sample_rate,
+                                 cfc=None))
+    dts = 1.0 / sample_rate
+    out: dict[str, Signal] = {}
+    for name, raw, unit in ((ACCEL, acc, "m/s^2"), (VELOCITY, vel, "m/s")):
+        data = np.empty_like(ts)
+        pre = ts < 0
+        if name == ACCEL:
+            data[pre] = 0.0
+        else:
+            data[pre] = -(truth.v0 + truth.gravity * ts[pre])
+        # integrating acquisition: mean of the truth over the preceding sample interval
+        post = np.flatnonzero(~pre)
+        cum = np.concatenate([[0.0], np.cumsum(0.5 * (raw[1:] + raw[:-1]) * np.diff(t_raw))])
+        tb = ts[post]
+        ta = np.maximum(tb - dts, 0.0)
+        mean = (np.interp(tb, t_raw, cum) - np.interp(ta, t_raw, cum)) / np.maximum(tb - ta, 1e-12)
+        mean[tb <= 0.0] = raw[0]
+        data[post] = mean
+        data = data + rng.normal(0.0, noise[name], size=data.shape)
+        data = _dsp.cfc(data, sample_rate, cfc)
+        out[name] = Signal(name, ts + trigger_offset, data, unit, cfc,
+                           {"source": "crashdem.diagnosis.generator (truth: midpoint RK2, "
+                                      f"dt={TRUTH_DT:g} s)"})
+    del dep  # penetration is not a lab channel here (no displacement transducer)
+    return out
+
+
+def concealed_case(seed: int, effect: str | None = "random", *, base: RomParams = RomParams(),
+                   recalibration: dict[str, float] | None = None, **acquire_kw) -> ConcealedCase:
+    """Generate a recording with one concealed effect.
+
+    Parameters
+    ----------
+    seed : seeds the effect choice (if ``effect == "random"``), its parameters, noise, trigger
+    effect : a catalogue name, ``"random"`` (drawn from the seed) or None (null case)
+    base : the baseline model the diagnosis will assume
+    recalibration : optional true scale factors of the existing parameters (``rom.SCALE_KEYS``);
+        a null case with a recalibration must be reported as recalibration, not missing physics
+    """
+    rng = np.random.default_rng(seed)
+    if effect == "random":
+        names = sorted(EFFECT_DRAWS)
+        effect = names[int(rng.integers(len(names)))]
+    values = draw_effect(effect, rng) if effect is not None else {}
+    recal = dict(recalibration or {})
+    truth = base.with_values(recal).with_values(values)
+    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
+    rec = acquire(truth, rng, trigger_offset=offset, **acquire_kw)
+    return ConcealedCase(effect, values, recal, seed, rec, truth, offset)
+
+
+def baseline(base: RomParams = RomParams(), settings: RomSettings = RomSettings()):
+    """The baseline simulation (diagnosing ROM, no effect) for a generated case."""
+    from crashdem.diagnosis.rom import simulate
+
+    return simulate(base, settings)
+

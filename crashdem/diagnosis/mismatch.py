@@ -1,0 +1,399 @@
+"""Locate where a simulated channel disagrees with a recording, judged against the recording's
+own noise, and say what the disagreement looks like (missing peak, peak too high, late, ...).
+
+All feature names describe the *simulation* relative to the recording: ``missing_peak`` = the
+recording has a peak the simulation lacks; ``peak_too_high`` = the simulated peak is higher;
+``peak_late`` = the simulated peak comes later; ``rebound_too_strong`` = the simulated body leaves
+faster; ``duration_too_long`` = the simulated pulse lasts longer.
+
+Notes
+-----
+Robust scale: sigma = 1.4826 MAD (Hampel 1974; Rousseeuw & Croux 1993). Peak detection by
+topographic prominence (``scipy.signal.find_peaks``) with a prominence floor of k sigma.
+Exceedance of |residual| > k sigma over a minimum duration of one noise correlation time
+1 / (2 B_eq) (band-limited noise, Bendat & Piersol, *Random Data*, section 8.2).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import signal as sps
+
+from crashdem.diagnosis import _dsp
+from crashdem.signal import Signal
+
+__all__ = ["NoiseEstimate", "Feature", "MismatchWindow", "estimate_noise", "onset_time",
+           "align", "find_features", "locate_mismatch", "MAD_TO_SIGMA", "K_SIGMA"]
+
+#: Gaussian consistency factor of the median absolute deviation
+MAD_TO_SIGMA = 1.4826
+#: residual significance threshold [sigma]: P(|N(0,1)| > 4) = 6e-5 per independent sample, i.e.
+#: < 1 % chance of a false window over ~100 independent samples of a 0.15 s CFC 60 record
+K_SIGMA = 4.0
+#: prominence threshold of a peak [sigma]
+K_PEAK = 6.0
+#: peaks closer than this in time are the same peak when matching recording and simulation [s]
+PEAK_MATCH_TOL = 0.006
+#: minimum number of quiet samples for a pre-event noise estimate
+MIN_QUIET_SAMPLES = 32
+#: onset threshold [sigma] and as a fraction of the signal range
+K_ONSET = 8.0
+ONSET_FRACTION = 0.02
+#: gap kept between the quiet (noise) window and the event onset [s] (raw data); filtered data
+#: keep three noise correlation times 3 / (2 B_eq) (CFC 60: ~14 ms)
+QUIET_GUARD = 0.002
+#: noise floor as a fraction of the channel range: 1e-4 is ~ the LSB of a 14-bit acquisition
+#: over the used range; only bites on noise-free (simulated) records
+NOISE_FLOOR_FRACTION = 1e-4
+#: duration of a pulse: between first and last crossing of this fraction of the recorded peak
+DURATION_FRACTION = 0.1
+
+
+@dataclass(frozen=True)
+class NoiseEstimate:
+    """Noise level of a channel: ``sigma`` [unit], how it was obtained, and the quiet window [s]."""
+
+    sigma: float
+    method: str
+    window: tuple[float, float] | None
+    unit: str = ""
+
+
+@dataclass(frozen=True)
+class Feature:
+    """One characterised difference between simulation and recording."""
+
+    feature: str
+    time_s: float
+    size: float
+    unit: str
+    significance: float  # size / its noise-induced uncertainty [-]
+    description: str
+
+
+@dataclass
+class MismatchWindow:
+    """A time window where |recording - simulation| exceeds k sigma for long enough."""
+
+    channel: str
+    t_start_s: float
+    t_end_s: float
+    feature: str
+    size: float
+    unit: str
+    max_residual_sigma: float
+    description: str
+    feature_time_s: float | None = None  # when the feature occurs in the recording [s]
+    other_features: list[dict[str, Any]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready dict of the window."""
+        return asdict(self)
+
+
+def _mad_sigma(x: np.ndarray) -> float:
+    x = np.asarray(x, dtype=float)
+    return MAD_TO_SIGMA * float(np.median(np.abs(x - np.median(x))))
+
+
+def _detrended(t: np.ndarray, x: np.ndarray) -> np.ndarray:
+    if t.size < 3:
+        return x - np.median(x)
+    c = np.polyfit(t - t[0], x, 1)
+    return x - np.polyval(c, t - t[0])
+
+
+def estimate_noise(sig: Signal, quiet: tuple[float, float] | None = None,
+                   floor_fraction: float = NOISE_FLOOR_FRACTION) -> NoiseEstimate:
+    """Noise standard deviation of a recorded channel, at least ``floor_fraction`` x range.
+
+    See ``_estimate_noise`` for the method. The floor keeps noise-free (simulated) "recordings"
+    from making every difference significant: sigma >= floor_fraction * (max - min).
+    """
+    est = _estimate_noise(sig, quiet)
+    floor = floor_fraction * float(np.ptp(sig.data)) if sig.data.size else 0.0
+    if est.sigma < floor:
+        return NoiseEstimate(floor, est.method + f"; below the floor, set to {floor_fraction:g} x range",
+                             est.window, est.unit)
+    return est
+
+
+def _estimate_noise(sig: Signal, quiet: tuple[float, float] | None = None) -> NoiseEstimate:
+    """Noise standard deviation of a recorded channel.
+
+    Parameters
+    ----------
+    sig : the recorded channel
+    quiet : optional (t0, t1) [s] known to hold no event (pre-impact); if omitted, the leading
+        segment before the event onset is found automatically (pre-trigger data), else the
+        high-frequency residual is used.
+
+    Returns
+    -------
+    NoiseEstimate with sigma in the channel unit.
+
+    Notes
+    -----
+    Pre-event: sigma = 1.4826 MAD of the linearly detrended quiet segment (a free-fall velocity
+    is a ramp). Fallback: 1.4826 MAD of the second difference divided by sqrt(6) (white noise;
+    underestimates band-limited noise, flagged in ``method``).
+    """
+    t, x = sig.t, sig.data
+    if quiet is not None:
+        m = (t >= quiet[0]) & (t <= quiet[1])
+        if m.sum() < MIN_QUIET_SAMPLES:
+            raise ValueError(f"estimate_noise: quiet window {quiet} s of {sig.name!r} holds "
+                             f"{int(m.sum())} samples, need >= {MIN_QUIET_SAMPLES}")
+        s = _mad_sigma(_detrended(t[m], x[m]))
+        return NoiseEstimate(s, "quiet window (given), MAD", (float(t[m][0]), float(t[m][-1])), sig.unit)
+    # leading segment: start with the first 5 % (or pre-zero data) and extend until the onset
+    n0 = max(MIN_QUIET_SAMPLES, int(0.05 * t.size))
+    if np.any(t < 0.0):
+        n0 = max(n0, int(np.searchsorted(t, 0.0)) - 2)
+    n0 = min(n0, t.size)
+    seg = _detrended(t[:n0], x[:n0])
+    s0 = _mad_sigma(seg)
+    rng = float(np.ptp(x)) if x.size else 0.0
+    if n0 >= MIN_QUIET_SAMPLES and s0 > 0 and s0 < 0.05 * rng:
+        c = np.polyfit(t[:n0] - t[0], x[:n0], 1)
+        dev = np.abs(x - np.polyval(c, t - t[0]))
+        thr = max(K_ONSET * s0, ONSET_FRACTION * rng)
+        above = np.flatnonzero(dev > thr)
+        n1 = int(above[0]) if above.size else t.size
+        # stay clear of the onset: a zero-phase filter spreads the event backwards in time
+        guard = QUIET_GUARD if sig.cfc is None else max(QUIET_GUARD, 3.0 / (2.0 * _dsp.noise_bandwidth(sig.fs, sig.cfc)))
+        n1 = max(MIN_QUIET_SAMPLES, n1 - max(3, int(guard * sig.fs)))
+        # skip the start-up of the filter at the record's beginning when there is room
+        n_a = int(guard * sig.fs) if n1 - int(guard * sig.fs) >= MIN_QUIET_SAMPLES else 0
+        seg = _detrended(t[n_a:n1], x[n_a:n1])
+        return NoiseEstimate(_mad_sigma(seg), "pre-event segment, MAD",
+                             (float(t[n_a]), float(t[n1 - 1])), sig.unit)
+    d2 = np.diff(x, 2)
+    return NoiseEstimate(_mad_sigma(d2) / math.sqrt(6.0),
+                         "second-difference MAD (no quiet segment; underestimates filtered noise)",
+                         None, sig.unit)
+
+
+def onset_time(sig: Signal, sigma: float) -> float:
+    """First time [s] the channel leaves its initial level by more than the onset threshold."""
+    x = sig.data
+    n0 = max(3, min(MIN_QUIET_SAMPLES, x.size // 10))
+    base = float(np.median(x[:n0]))
+    thr = max(K_ONSET * sigma, ONSET_FRACTION * float(np.ptp(x)))
+    idx = np.flatnonzero(np.abs(x - base) > thr)
+    if not idx.size:
+        return float(sig.t[0])
+    i = int(idx[0])
+    if i == 0:
+        return float(sig.t[0])
+    # linear interpolation of the crossing
+    x0, x1 = abs(x[i - 1] - base), abs(x[i] - base)
+    frac = (thr - x0) / (x1 - x0) if x1 != x0 else 0.0
+    return float(sig.t[i - 1] + frac * (sig.t[i] - sig.t[i - 1]))
+
+
+def align(recording: Signal, simulation: Signal, shift: float = 0.0) -> Signal:
+    """The simulation, time-shifted by ``shift`` [s] and resampled on the recording's time base;
+    samples outside the simulated range hold the nearest simulated value."""
+    ts = simulation.t + shift
+    data = np.interp(recording.t, ts, simulation.data)
+    return Signal(simulation.name, recording.t.copy(), data, simulation.unit, simulation.cfc,
+                  dict(simulation.meta))
+
+
+def _peaks(t: np.ndarray, x: np.ndarray, sigma: float, distance: int) -> list[tuple[float, float, float]]:
+    """(time, height, prominence) of the positive peaks above K_PEAK sigma prominence."""
+    prom = max(K_PEAK * sigma, 0.03 * float(np.ptp(x)))
+    idx, props = sps.find_peaks(x, prominence=prom, distance=max(1, distance))
+    return [(float(t[i]), float(x[i]), float(p)) for i, p in zip(idx, props["prominences"])]
+
+
+def _duration(t: np.ndarray, x: np.ndarray, level: float) -> tuple[float, float] | None:
+    idx = np.flatnonzero(x > level)
+    if idx.size == 0:
+        return None
+    return float(t[idx[0]]), float(t[idx[-1]])
+
+
+def find_features(recording: Signal, simulation: Signal, sigma: float,
+                  kind: str | None = None, t_initial: float | None = None) -> list[Feature]:
+    """Characterise the differences between an aligned simulation and the recording.
+
+    Parameters
+    ----------
+    recording, simulation : same time base (see ``align``)
+    sigma : recording noise [unit]
+    kind : "acceleration" (pulse-like: peaks and duration), "velocity" (rebound) or None
+        (from the unit)
+    t_initial : time [s] at which initial values are compared (default: first sample)
+    """
+    t, xr, xs = recording.t, recording.data, simulation.data
+    fs = recording.fs
+    unit = recording.unit
+    if kind is None:
+        kind = "velocity" if unit in ("m/s",) else "acceleration"
+    out: list[Feature] = []
+    if kind == "acceleration":
+        dist = int(0.004 * fs)
+        pr = _peaks(t, xr, sigma, dist)
+        ps = _peaks(t, xs, sigma, dist)
+        used: set[int] = set()
+        for tr, hr, prr in pr:
+            j_best, d_best = -1, math.inf
+            for j, (ts_, _, _) in enumerate(ps):
+                if j not in used and abs(ts_ - tr) < d_best:
+                    j_best, d_best = j, abs(ts_ - tr)
+            if j_best >= 0 and d_best <= max(PEAK_MATCH_TOL, 0.15 * max(tr, 1e-3)):
+                used.add(j_best)
+                ts_, hs, _ = ps[j_best]
+                dh = hs - hr
+                if abs(dh) > K_SIGMA * sigma:
+                    name = "peak_too_high" if dh > 0 else "peak_too_low"
+                    out.append(Feature(name, tr, dh, unit, abs(dh) / sigma,
+                                       f"simulated peak {'higher' if dh > 0 else 'lower'} by "
+                                       f"{abs(dh):.3g} {unit} at {tr * 1e3:.1f} ms"))
+                dt = ts_ - tr
+                # timing noise: sigma / curvature-limited slope; use 2 samples as the floor
+                if abs(dt) > max(2.0 / fs, 0.002):
+                    name = "peak_late" if dt > 0 else "peak_early"
+                    out.append(Feature(name, tr, dt, "s", abs(dt) * fs / 2.0,
+                                       f"simulated peak {abs(dt) * 1e3:.1f} ms "
+                                       f"{'late' if dt > 0 else 'early'} (recorded at {tr * 1e3:.1f} ms)"))
+            else:
+                nth = ["first", "second", "third", "fourth"][min(3, sum(1 for p in pr if p[0] < tr))]
+                out.append(Feature("missing_peak", tr, prr, unit, prr / sigma,
+                                   f"recording has a {nth} peak of {prr:.3g} {unit} prominence at "
+                                   f"{tr * 1e3:.1f} ms that the simulation lacks"))
+        for j, (ts_, hs, prs) in enumerate(ps):
+            if j not in used:
+                out.append(Feature("extra_peak", ts_, prs, unit, prs / sigma,
+                                   f"simulation has a peak at {ts_ * 1e3:.1f} ms "
+                                   f"({prs:.3g} {unit} prominence) absent from the recording"))
+        level = DURATION_FRACTION * float(np.max(xr))
+        dr, ds = _duration(t, xr, level), _duration(t, xs, level)
+        if dr is not None and ds is not None:
+            lr, ls = dr[1] - dr[0], ds[1] - ds[0]
+            d = ls - lr
+            if abs(d) > max(0.002, 3.0 / fs):
+                name = "duration_too_long" if d > 0 else "duration_too_short"
+                out.append(Feature(name, dr[1], d, "s", abs(d) * fs / 3.0,
+                                   f"simulated pulse {abs(d) * 1e3:.1f} ms "
+                                   f"{'longer' if d > 0 else 'shorter'} (recorded {lr * 1e3:.1f} ms)"))
+        # ringing: many sign changes of the residual above the noise within the event
+        res = xs - xr
+        big = np.abs(res) > K_SIGMA * sigma
+        if big.sum() > 0:
+            sgn = np.sign(res[big])
+            changes = int(np.sum(sgn[1:] != sgn[:-1]))
+            if changes >= 6:
+                tb = t[big]
+                out.append(Feature("oscillation", float(np.median(tb)), float(np.max(np.abs(res))),
+                                   unit, changes / 2.0,
+                                   f"residual oscillates ({changes} sign changes above "
+                                   f"{K_SIGMA:g} sigma) between {tb[0] * 1e3:.1f} and "
+                                   f"{tb[-1] * 1e3:.1f} ms: unmodelled resonance or filter"))
+    else:
+        # velocity along +z: rebound = largest upward velocity after the velocity crosses zero
+        def rebound(x: np.ndarray) -> tuple[float, float] | None:
+            up = np.flatnonzero(x > 0.0)
+            if not up.size:
+                return None
+            i0 = int(up[0])
+            i = i0 + int(np.argmax(x[i0:]))
+            return float(t[i]), float(x[i])
+
+        rr, rs = rebound(xr), rebound(xs)
+        if rr is not None or rs is not None:
+            vr = rr[1] if rr else 0.0
+            vs = rs[1] if rs else 0.0
+            tt = (rr or rs)[0]
+            d = vs - vr
+            if abs(d) > K_SIGMA * sigma:
+                name = "rebound_too_strong" if d > 0 else "rebound_too_weak"
+                out.append(Feature(name, tt, d, unit, abs(d) / sigma,
+                                   f"simulated rebound speed {vs:.3g} {unit} vs recorded {vr:.3g} {unit}"))
+        i0 = int(np.searchsorted(t, t_initial)) if t_initial is not None else 0
+        i0 = min(i0, t.size - 1)
+        d0 = xs[i0] - xr[i0]
+        if abs(d0) > K_SIGMA * sigma:
+            out.append(Feature("initial_offset", float(t[i0]), d0, unit, abs(d0) / sigma,
+                               f"simulated initial value differs by {d0:.3g} {unit}: impact "
+                               "conditions differ"))
+    return out
+
+
+def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate | None = None,
+                    k_sigma: float = K_SIGMA, min_duration: float | None = None,
+                    shift: float | None = None) -> list[MismatchWindow]:
+    """Windows where the simulation leaves the recording's noise band, each with a feature.
+
+    Parameters
+    ----------
+    recording : recorded channel (the reference)
+    simulation : simulated channel (any time base; resampled onto the recording)
+    noise : recording noise (default ``estimate_noise(recording)``)
+    k_sigma : significance threshold [sigma]
+    min_duration : shortest window kept [s]; default one noise correlation time 1/(2 B_eq) of
+        the recording's CFC (or 2 samples for raw data)
+    shift : time shift applied to the simulation [s]; default: align the onsets
+
+    Returns
+    -------
+    list of MismatchWindow, in time order.
+    """
+    rec = recording.to_si()
+    sim = simulation.to_si()
+    if noise is None:
+        noise = estimate_noise(rec)
+    sigma = max(noise.sigma, 1e-12 * max(1.0, float(np.max(np.abs(rec.data)))))
+    if shift is None:
+        shift = onset_time(rec, sigma) - onset_time(sim, 0.0)
+        if abs(shift) > 0.05 * float(np.ptp(rec.t)):
+            shift = 0.0
+    sim_a = align(rec, sim, shift)
+    fs = rec.fs
+    if min_duration is None:
+        min_duration = (1.0 / (2.0 * _dsp.noise_bandwidth(fs, rec.cfc)) if rec.cfc else 2.0 / fs)
+    res = sim_a.data - rec.data
+    # only where the simulation exists (no extrapolated samples)
+    valid = (rec.t >= simulation.t[0] + shift) & (rec.t <= simulation.t[-1] + shift)
+    mask = (np.abs(res) > k_sigma * sigma) & valid
+    # close gaps shorter than the minimum duration, then drop short runs
+    gap = max(1, int(round(min_duration * fs)))
+    idx = np.flatnonzero(mask)
+    runs: list[list[int]] = []
+    for i in idx:
+        if runs and i - runs[-1][1] <= gap:
+            runs[-1][1] = i
+        else:
+            runs.append([i, i])
+    kind = "velocity" if rec.unit == "m/s" else "acceleration"
+    t_init = float(rec.t[valid][0]) if valid.any() else None
+    feats = find_features(rec, sim_a, sigma, kind, t_initial=t_init)
+    windows: list[MismatchWindow] = []
+    for i0, i1 in runs:
+        t0, t1 = float(rec.t[i0]), float(rec.t[i1])
+        if t1 - t0 < min_duration:
+            continue
+        pad = 0.25 * (t1 - t0) + min_duration
+        inside = [f for f in feats if t0 - pad <= f.time_s <= t1 + pad]
+        inside.sort(key=lambda f: -f.significance)
+        seg = res[i0:i1 + 1]
+        peak_res = float(np.max(np.abs(seg)) / sigma)
+        if inside:
+            f = inside[0]
+            windows.append(MismatchWindow(rec.name, t0, t1, f.feature, f.size, f.unit, peak_res,
+                                          f.description, f.time_s, [asdict(g) for g in inside[1:]]))
+        else:
+            mean = float(np.mean(seg))
+            name = ("force_too_high" if mean > 0 else "force_too_low") if kind == "acceleration" \
+                else ("value_too_high" if mean > 0 else "value_too_low")
+            windows.append(MismatchWindow(rec.name, t0, t1, name, mean, rec.unit, peak_res,
+                                          f"simulation {'above' if mean > 0 else 'below'} the "
+                                          f"recording by {abs(mean):.3g} {rec.unit} on average "
+                                          f"between {t0 * 1e3:.1f} and {t1 * 1e3:.1f} ms",
+                                          0.5 * (t0 + t1)))
+    return windows

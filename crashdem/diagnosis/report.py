@@ -1,0 +1,155 @@
+"""Write a diagnosis :class:`crashdem.diagnosis.Report` to ``report.json``, ``report.md`` and
+overlay plots (recording, baseline, refitted simulation; mismatch windows shaded).
+
+Plots use matplotlib's Agg backend (no display); accelerations are shown in g (``G0``).
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crashdem.signal import G0
+
+__all__ = ["write_report", "to_json", "to_markdown", "plot_overlays"]
+
+
+def _clean(x: Any) -> Any:
+    """JSON-safe copy: numpy scalars to Python, non-finite floats to None, tuples to lists."""
+    if isinstance(x, dict):
+        return {str(k): _clean(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_clean(v) for v in x]
+    if isinstance(x, (np.floating, float)):
+        v = float(x)
+        return v if math.isfinite(v) else None
+    if isinstance(x, (np.integer,)):
+        return int(x)
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.ndarray):
+        return _clean(x.tolist())
+    return x
+
+
+def to_json(report) -> str:
+    """The report as JSON text (what ``report.json`` holds)."""
+    return json.dumps(_clean(report.to_dict()), indent=2, sort_keys=False)
+
+
+def _fmt(v: float | None, nd: int = 3) -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "n/a"
+    return f"{v:.{nd}g}"
+
+
+def to_markdown(report, plots: list[str] | None = None) -> str:
+    """A readable summary of the report."""
+    d = report.to_dict()
+    fit = d["fit"]
+    lines = ["# crashdem diagnosis report", ""]
+    mp = d["missing_physics"]
+    lines += [f"**Missing physics:** {mp if mp else 'none claimed'}  ",
+              f"**Best explanation:** {d['best'] or 'baseline (within noise)'}  ",
+              f"**Decision:** {d['decision']}", ""]
+    lines += ["## Noise of the recording", "", "| channel | sigma | unit | method |", "|---|---|---|---|"]
+    for ch, n in d["noise"].items():
+        lines.append(f"| {ch} | {_fmt(n['sigma'])} | {n['unit']} | {n['method']} |")
+    lines += ["", "## Mismatch windows (baseline vs recording)", ""]
+    if d["mismatch"]:
+        lines += ["| channel | from [ms] | to [ms] | feature | size | max residual [sigma] | what |",
+                  "|---|---|---|---|---|---|---|"]
+        for w in d["mismatch"]:
+            lines.append(f"| {w['channel']} | {w['t_start_s'] * 1e3:.1f} | {w['t_end_s'] * 1e3:.1f} | "
+                         f"{w['feature']} | {_fmt(w['size'])} {w['unit']} | "
+                         f"{w['max_residual_sigma']:.1f} | {w['description']} |")
+    else:
+        lines.append("No window exceeds the noise threshold.")
+    lines += ["", "## Hypotheses (ranked by BIC)", "",
+              "| rank | name | parameters (± 1 sigma) | score before | score after | Delta BIC vs recal. | penalty | evidence |",
+              "|---|---|---|---|---|---|---|---|"]
+    for i, h in enumerate(d["hypotheses"], 1):
+        pars = h["parameters"] if h["parameters"] else h["recalibration"]
+        unc = h["uncertainty"] if h["parameters"] else h["recalibration_uncertainty"]
+        units = h.get("units", {})
+        ptxt = "; ".join(f"{k} = {_fmt(v)} ± {_fmt(unc.get(k))} {units.get(k, '')}".strip()
+                         for k, v in pars.items())
+        lines.append(f"| {i} | {h['name']} | {ptxt} | {_fmt(h['score_before'])} | "
+                     f"{_fmt(h['score_after'])} | {h['delta_bic_vs_recalibration']:.1f} | "
+                     f"{h['complexity_penalty']:.1f} | {h['evidence']} |")
+    lines += ["", f"## Fit ({fit['metric']})", "",
+              "| channel | score before | score after | peak error before | peak error after | "
+              "timing error before [ms] | timing error after [ms] | RMS before | RMS after |",
+              "|---|---|---|---|---|---|---|---|---|"]
+    for ch in d["channels"]:
+        b = fit["before"]["per_channel"][ch]
+        a = fit["after"]["per_channel"][ch]
+        lines.append(f"| {ch} | {_fmt(b['score'])} | {_fmt(a['score'])} | {_fmt(b['peak_error'])} | "
+                     f"{_fmt(a['peak_error'])} | {b['timing_error_s'] * 1e3:.1f} | "
+                     f"{a['timing_error_s'] * 1e3:.1f} | {_fmt(b['rms_error'])} | {_fmt(a['rms_error'])} |")
+    lines.append(f"| **overall** | {_fmt(fit['before']['overall'])} | {_fmt(fit['after']['overall'])} "
+                 "| | | | | | |")
+    sims = d["simulations"]
+    lines += ["", "## Cost", "",
+              f"Screening runs ({sims['screening_model']}): {sims['screening_runs']}; full simulations: "
+              f"{sims['full_simulations']}; wall time {sims['wall_time_s']:.1f} s.", ""]
+    if plots:
+        lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
+    return "\n".join(lines)
+
+
+def plot_overlays(report, out_dir: Path) -> list[str]:
+    """One PNG per channel: recording, baseline, refitted simulation, shaded mismatch windows."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    paths = []
+    for ch in report.channels:
+        rec = report.recording[ch]
+        scale, unit = (1.0 / G0, "g") if rec.unit == "m/s^2" else (1.0, rec.unit)
+        fig, ax = plt.subplots(figsize=(8, 4.5))
+        for w in report.mismatch:
+            if w.channel == ch:
+                ax.axvspan(w.t_start_s * 1e3, w.t_end_s * 1e3, color="tab:red", alpha=0.12, lw=0)
+        ax.plot(rec.t * 1e3, rec.data * scale, color="k", lw=1.2, label="recording")
+        if ch in report.baseline:
+            b = report.baseline[ch]
+            ax.plot(b.t * 1e3, b.data * scale, color="tab:blue", lw=1.0, ls="--", label="baseline")
+        if ch in report.refitted:
+            r = report.refitted[ch]
+            lab = f"refitted ({report.best})" if report.best else "refitted"
+            ax.plot(r.t * 1e3, r.data * scale, color="tab:orange", lw=1.0, label=lab)
+        ax.set_xlabel("time [ms]")
+        ax.set_ylabel(f"{ch} [{unit}]")
+        title = f"{ch}: missing physics = {report.missing_physics or 'none'}"
+        ax.set_title(title)
+        ax.grid(alpha=0.3)
+        ax.legend(loc="best", fontsize=8)
+        fig.tight_layout()
+        p = out_dir / f"overlay_{ch}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(str(p))
+    return paths
+
+
+def write_report(report, out_dir, plots: bool = True) -> dict[str, str | list[str]]:
+    """Write ``report.json``, ``report.md`` and (optionally) overlay PNGs into ``out_dir``.
+
+    Returns
+    -------
+    dict with the written paths (``json``, ``md``, ``plots``).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    pngs = plot_overlays(report, out) if plots else []
+    jp = out / "report.json"
+    jp.write_text(to_json(report), encoding="utf-8")
+    mp = out / "report.md"
+    mp.write_text(to_markdown(report, pngs), encoding="utf-8")
+    return {"json": str(jp), "md": str(mp), "plots": pngs}

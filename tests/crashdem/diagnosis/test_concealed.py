@@ -1,0 +1,147 @@
+"""End-to-end diagnosis on concealed-effect recordings (truth: midpoint RK2 at 5 us with an
+integrating acquisition, 12.5 kHz, sensor noise, trigger offset, CFC 60; diagnosis: semi-implicit
+Euler ROM at 20 us). Oracle for every assertion: the generator's hidden truth (effect name and
+parameter values), which the diagnosis never sees.
+
+Score: ISO/TS 18571 overall rating from ``crashdem.metrics`` over the event window (onset - 5 ms
+to 10 ms after the pulse), averaged over the diagnosed channels (``accel_z``, ``velocity_z``);
+``fit.metric_name()`` reports the fallback if the metric module is missing.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from crashdem.diagnosis import diagnose, fit
+from crashdem.diagnosis.generator import concealed_case
+from crashdem.diagnosis.rom import RomParams, simulate
+
+#: effects whose ISO/TS 18571 footprint leaves room for the 0.1 improvement criterion
+EFFECTS = ("soil_layering", "boundary_proximity", "cohesion", "particle_rotation",
+           "sensor_dynamics", "structural_crush", "initial_conditions")
+#: contact damping changes only the unloading and the rebound: baseline ISO stays >= 0.9, so
+#: an improvement of 0.1 is arithmetically impossible for it; it is checked separately
+DAMPING = "contact_damping"
+SEEDS = (11, 12)
+NULL_SEEDS = (21, 22)
+#: a null case with wrong existing parameters: must come out as recalibration
+RECAL_SEED = 23
+RECAL_TRUTH = {"strength_scale": 1.25, "stiffness_scale": 0.8}
+
+#: issue-7 acceptance numbers
+MIN_TOP1_RATE = 0.90
+PARAM_RTOL = 0.15
+MIN_SCORE_GAIN = 0.10
+MIN_SCORE_AFTER = 0.85
+
+
+@pytest.fixture(scope="module")
+def runs():
+    base = simulate(RomParams())
+    out = []
+    cases = [(e, s) for e in (*EFFECTS, DAMPING) for s in SEEDS] + [(None, s) for s in NULL_SEEDS]
+    for effect, seed in cases:
+        case = concealed_case(seed, effect)
+        t0 = time.perf_counter()
+        rep = diagnose(base, case.recording)
+        out.append((case, rep, time.perf_counter() - t0))
+    case = concealed_case(RECAL_SEED, None, recalibration=RECAL_TRUTH)
+    t0 = time.perf_counter()
+    rep = diagnose(base, case.recording)
+    out.append((case, rep, time.perf_counter() - t0))
+    # confusion matrix (truth row -> top-ranked hypothesis) and per-case numbers
+    conf = Counter((c.effect or "null", r.hypotheses[0]["name"]) for c, r, _ in out)
+    print("\nconfusion (truth -> top-ranked):")
+    for (tr, top), n in sorted(conf.items()):
+        print(f"  {tr:20s} -> {top:20s} x{n}")
+    print(f"metric: {fit.metric_name()}")
+    for c, r, dt in out:
+        print(f"  {str(c.effect):20s} seed {c.seed}: claim={r.missing_physics} "
+              f"score {r.fit['before']['overall']:.3f} -> {r.fit['after']['overall']:.3f} "
+              f"runs={r.simulations['screening_runs']} {dt:.1f} s")
+    return out
+
+
+def _effect_runs(runs):
+    return [(c, r) for c, r, _ in runs if c.effect is not None]
+
+
+def test_top_ranked_is_the_concealed_effect(runs):
+    """>= 90 % of the concealed-effect cases rank the concealed effect first, and the same
+    share claims it as the missing physics."""
+    er = _effect_runs(runs)
+    assert len({c.effect for c, _ in er}) >= 5 and len(er) >= 10
+    top = np.mean([r.hypotheses[0]["name"] == c.effect for c, r in er])
+    claimed = np.mean([r.missing_physics == c.effect for c, r in er])
+    assert top >= MIN_TOP1_RATE, top
+    assert claimed >= MIN_TOP1_RATE, claimed
+
+
+def test_parameters_recovered_within_15_percent(runs):
+    """Every drawn parameter of the concealed effect is recovered within 15 % (cases where the
+    effect is ranked first)."""
+    bad = []
+    for c, r in _effect_runs(runs):
+        h = r.hypotheses[0]
+        if h["name"] != c.effect:
+            continue
+        for k, v in c.values.items():
+            if abs(h["parameters"][k] / v - 1.0) > PARAM_RTOL:
+                bad.append((c.effect, c.seed, k, v, h["parameters"][k]))
+    assert not bad, bad
+
+
+def test_score_improves_by_0p1_and_ends_above_0p85(runs):
+    """ISO/TS 18571 (overall, event window) improves by >= 0.1 and ends >= 0.85."""
+    for c, r in _effect_runs(runs):
+        if c.effect == DAMPING:
+            continue
+        before, after = r.fit["before"]["overall"], r.fit["after"]["overall"]
+        assert after >= MIN_SCORE_AFTER, (c.effect, c.seed, after)
+        assert after - before >= MIN_SCORE_GAIN, (c.effect, c.seed, before, after)
+
+
+def test_contact_damping_scores(runs):
+    """Contact damping: the baseline already rates >= 0.9 (the effect lives in the unloading
+    and rebound), so the check is: the refit ends >= 0.85 and above the baseline."""
+    for c, r in _effect_runs(runs):
+        if c.effect != DAMPING:
+            continue
+        before, after = r.fit["before"]["overall"], r.fit["after"]["overall"]
+        assert before >= 0.9
+        assert after >= MIN_SCORE_AFTER and after > before
+
+
+def test_null_cases_claim_no_missing_physics(runs):
+    """Null recordings (baseline truth, other numerics, noise) claim no missing physics; the
+    recalibration null case is reported as recalibration with the true scale factors within
+    15 %."""
+    nulls = [(c, r) for c, r, _ in runs if c.effect is None]
+    assert len(nulls) == len(NULL_SEEDS) + 1
+    for c, r in nulls:
+        assert r.missing_physics is None, (c.seed, r.decision)
+    c, r = next((c, r) for c, r in nulls if c.recalibration)
+    assert r.best == "recalibration"
+    rec = next(h for h in r.hypotheses if h["name"] == "recalibration")["recalibration"]
+    for k, v in RECAL_TRUTH.items():
+        assert abs(rec[k] / v - 1.0) < PARAM_RTOL, (k, rec[k], v)
+
+
+def test_report_has_required_fields(runs):
+    """Schema of the report for one case (issue 7 list of fields)."""
+    _, r, _ = runs[0]
+    d = r.to_dict()
+    assert d["mismatch"] and {"channel", "t_start_s", "t_end_s", "feature", "size"} <= set(d["mismatch"][0])
+    h = d["hypotheses"][0]
+    assert {"name", "parameters", "uncertainty", "score_before", "score_after", "evidence",
+            "complexity_penalty"} <= set(h)
+    assert all(np.isfinite(v) and v >= 0 for v in h["uncertainty"].values())
+    assert "missing_physics" in d
+    assert {"metric", "before", "after"} <= set(d["fit"])
+    for key in ("per_channel", "overall"):
+        assert key in d["fit"]["before"] and key in d["fit"]["after"]
+    ch = d["channels"][0]
+    assert {"score", "peak_error", "timing_error_s", "rms_error"} <= set(d["fit"]["after"]["per_channel"][ch])
