@@ -1,0 +1,1104 @@
+"""Numba kernels of the soil DEM engine (arrays and scalars only).
+
+Determinism: every ``prange`` iteration writes only its own index. Pair forces are stored per
+pair (half list, row i holds j > i) and gathered per particle in a fixed order (own row, then the
+transposed list sorted by pair index), so the result is bit-identical for any thread count.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import types
+
+import numba
+import numpy as np
+from numba import prange
+
+from soil.contact_laws import (
+    coulomb_cap,
+    cohesive_normal_force,
+    cohesive_shear_cap,
+    damping_coefficient,
+    damping_ratio,
+    linear_normal_force,
+    normal_dissipation,
+    moment_cap,
+    normal_stiffness,
+    rolling_stiffness,
+    rotate_shear,
+    shear_stiffness,
+    spring_dissipation,
+)
+
+jit = functools.partial(numba.njit, cache=True)
+
+
+class _Dual:
+    """A kernel compiled twice: ``parallel=True`` (prange over threads) and serial (prange runs
+    as range; used for small systems or one thread, where thread start-up dominates)."""
+
+    def __init__(self, py_func):
+        self.parallel = numba.njit(cache=True, parallel=True)(py_func)
+        serial = types.FunctionType(py_func.__code__, py_func.__globals__,
+                                    py_func.__name__ + "_serial", py_func.__defaults__,
+                                    py_func.__closure__)
+        serial.__qualname__ = py_func.__qualname__ + "_serial"
+        serial.__module__ = py_func.__module__
+        self.serial = numba.njit(cache=True)(serial)
+        self.__doc__ = py_func.__doc__
+        self.__name__ = py_func.__name__
+
+    def __call__(self, *args):
+        return self.parallel(*args)
+
+
+def pjit(py_func):
+    return _Dual(py_func)
+
+# material table columns
+M_YOUNG = 0
+M_RATIO = 1
+M_TANPHI = 2
+M_RESTITUTION = 3  # 1.0 = no viscous damping
+M_COHESIVE = 4
+M_SN = 5
+M_SS = 6
+M_AKR = 7
+M_AKTW = 8
+M_ETA_R = 9  # < 0 = no cap
+M_ETA_T = 10
+M_PLASTIC = 11
+M_MOMENTS = 12
+M_MU_R = 13  # < 0 = no rolling resistance
+M_DENSITY = 14
+M_NCOL = 15
+
+# pair state flags
+BOND_NONE = 0
+BOND_ACTIVE = 1
+
+# boundary contact history columns: Fs[3], n[3], fn, kn, ks, M_roll[3], kr
+B_NCOL = 13
+
+# boundary element types
+E_PLANE = 0
+E_CYLINDER = 1
+E_SPHERE = 2
+E_FACET = 3
+
+
+# ----------------------------------------------------------------------------------------------
+# integration
+# ----------------------------------------------------------------------------------------------
+@pjit
+def integrate(x, v, w, f, t, inv_mass, inv_inertia, dt, damping, e_glob, x_ref, half_skin2,
+              has_rot):
+    """Leapfrog update v += dt F/m, x += dt v (and w += dt T/I); returns #particles that moved
+    more than skin/2 since the last neighbour build.
+
+    Notes
+    -----
+    Leapfrog/velocity Verlet (ARCHITECTURE section 1). Cundall non-viscous damping
+    F <- F - lambda sign(F v_mid) |F| per component, v_mid = v + dt F / (2m) (Yade
+    ``NewtonIntegrator.damping``); its power lambda |F||v_mid| is accumulated in ``e_glob``.
+    """
+    n = x.shape[0]
+    moved = 0
+    for i in prange(n):
+        im = inv_mass[i]
+        for k in range(3):
+            fk = f[i, k]
+            if damping > 0.0:
+                vm = v[i, k] + 0.5 * dt * fk * im
+                s = fk * vm
+                if s > 0.0:
+                    fk = fk * (1.0 - damping)
+                    e_glob[i] += damping * abs(f[i, k] * vm) * dt
+                elif s < 0.0:
+                    fk = fk * (1.0 + damping)
+                    e_glob[i] += damping * abs(f[i, k] * vm) * dt
+            v[i, k] += dt * fk * im
+            x[i, k] += dt * v[i, k]
+        if has_rot:
+            ii = inv_inertia[i]
+            if ii > 0.0:
+                for k in range(3):
+                    tk = t[i, k]
+                    if damping > 0.0:
+                        wm = w[i, k] + 0.5 * dt * tk * ii
+                        s = tk * wm
+                        if s > 0.0:
+                            tk = tk * (1.0 - damping)
+                            e_glob[i] += damping * abs(t[i, k] * wm) * dt
+                        elif s < 0.0:
+                            tk = tk * (1.0 + damping)
+                            e_glob[i] += damping * abs(t[i, k] * wm) * dt
+                    w[i, k] += dt * tk * ii
+        dx = x[i, 0] - x_ref[i, 0]
+        dy = x[i, 1] - x_ref[i, 1]
+        dz = x[i, 2] - x_ref[i, 2]
+        if dx * dx + dy * dy + dz * dz > half_skin2:
+            moved += 1
+    return moved
+
+
+# ----------------------------------------------------------------------------------------------
+# neighbour search
+# ----------------------------------------------------------------------------------------------
+@jit
+def cell_sort(x, is_large, lo, inv_cell, nx, ny, nz, cell_of):
+    """Counting sort of the small particles into cells; returns (cell_start, cell_list)."""
+    n = x.shape[0]
+    ncell = nx * ny * nz
+    counts = np.zeros(ncell + 1, np.int64)
+    for i in range(n):
+        if is_large[i]:
+            cell_of[i] = -1
+            continue
+        cx = int((x[i, 0] - lo[0]) * inv_cell)
+        cy = int((x[i, 1] - lo[1]) * inv_cell)
+        cz = int((x[i, 2] - lo[2]) * inv_cell)
+        cx = min(max(cx, 0), nx - 1)
+        cy = min(max(cy, 0), ny - 1)
+        cz = min(max(cz, 0), nz - 1)
+        c = (cz * ny + cy) * nx + cx
+        cell_of[i] = c
+        counts[c + 1] += 1
+    for c in range(ncell):
+        counts[c + 1] += counts[c]
+    fill = counts[:-1].copy()
+    cell_list = np.empty(counts[ncell], np.int32)
+    for i in range(n):
+        c = cell_of[i]
+        if c >= 0:
+            cell_list[fill[c]] = i
+            fill[c] += 1
+    return counts, cell_list
+
+
+@numba.njit(cache=True, inline="always")
+def _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
+              skin, out, write, cap):
+    """Neighbours j > i of particle i within r_i + r_j + skin; writes them to ``out`` if
+    ``write``; returns the count (unsorted)."""
+    cnt = 0
+    xi = x[i, 0]
+    yi = x[i, 1]
+    zi = x[i, 2]
+    ri = radius[i] + skin
+    n = x.shape[0]
+    if is_large[i]:
+        for j in range(i + 1, n):
+            dx = x[j, 0] - xi
+            dy = x[j, 1] - yi
+            dz = x[j, 2] - zi
+            rc = ri + radius[j]
+            if dx * dx + dy * dy + dz * dz < rc * rc:
+                if write and cnt < cap:
+                    out[cnt] = j
+                cnt += 1
+        return cnt
+    c = cell_of[i]
+    cx = c % nx
+    cy = (c // nx) % ny
+    cz = c // (nx * ny)
+    for kz in range(max(cz - 1, 0), min(cz + 2, nz)):
+        for ky in range(max(cy - 1, 0), min(cy + 2, ny)):
+            base = (kz * ny + ky) * nx
+            for kx in range(max(cx - 1, 0), min(cx + 2, nx)):
+                cc = base + kx
+                for q in range(cell_start[cc], cell_start[cc + 1]):
+                    j = cell_list[q]
+                    if j <= i:
+                        continue
+                    dx = x[j, 0] - xi
+                    dy = x[j, 1] - yi
+                    dz = x[j, 2] - zi
+                    rc = ri + radius[j]
+                    if dx * dx + dy * dy + dz * dz < rc * rc:
+                        if write and cnt < cap:
+                            out[cnt] = j
+                        cnt += 1
+    for q in range(large_idx.shape[0]):
+        j = large_idx[q]
+        if j <= i:
+            continue
+        dx = x[j, 0] - xi
+        dy = x[j, 1] - yi
+        dz = x[j, 2] - zi
+        rc = ri + radius[j]
+        if dx * dx + dy * dy + dz * dz < rc * rc:
+            if write and cnt < cap:
+                out[cnt] = j
+            cnt += 1
+    return cnt
+
+
+@pjit
+def count_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
+                     skin, counts):
+    n = x.shape[0]
+    dummy = np.empty(0, np.int32)
+    for i in prange(n):
+        counts[i] = _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of,
+                              nx, ny, nz, skin, dummy, False)
+
+
+@pjit
+def fill_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
+                    skin, row_start, nbr):
+    n = x.shape[0]
+    for i in prange(n):
+        a = row_start[i]
+        b = row_start[i + 1]
+        row = nbr[a:b]
+        _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
+                  skin, row, True, b - a)
+        # insertion sort (rows are short)
+        for p in range(1, b - a):
+            key = row[p]
+            q = p - 1
+            while q >= 0 and row[q] > key:
+                row[q + 1] = row[q]
+                q -= 1
+            row[q + 1] = key
+
+
+@pjit
+def scan_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
+                    skin, buf, counts):
+    """Single pass: neighbours of row i into ``buf[i, :cap]`` (sorted) and the full count."""
+    n = x.shape[0]
+    cap = buf.shape[1]
+    for i in prange(n):
+        row = buf[i]
+        c = _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny,
+                      nz, skin, row, True, cap)
+        counts[i] = c
+        m = min(c, cap)
+        for p in range(1, m):
+            key = row[p]
+            q = p - 1
+            while q >= 0 and row[q] > key:
+                row[q + 1] = row[q]
+                q -= 1
+            row[q + 1] = key
+
+
+@pjit
+def compact_neighbours(buf, row_start, nbr):
+    n = buf.shape[0]
+    for i in prange(n):
+        a = row_start[i]
+        for k in range(row_start[i + 1] - a):
+            nbr[a + k] = buf[i, k]
+
+
+@jit
+def bounds(x, is_large):
+    """Lower and upper corners of the small particles' centres (all if none is small)."""
+    n = x.shape[0]
+    lo = np.full(3, np.inf)
+    hi = np.full(3, -np.inf)
+    any_small = False
+    for i in range(n):
+        if is_large[i]:
+            continue
+        any_small = True
+        for k in range(3):
+            v = x[i, k]
+            if v < lo[k]:
+                lo[k] = v
+            if v > hi[k]:
+                hi[k] = v
+    if not any_small:
+        for i in range(n):
+            for k in range(3):
+                lo[k] = min(lo[k], x[i, k])
+                hi[k] = max(hi[k], x[i, k])
+    return lo, hi
+
+
+@jit
+def _find(nbr, a, b, j):
+    """Binary search of j in the sorted slice nbr[a:b]; returns the index or -1."""
+    lo = a
+    hi = b
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        v = nbr[mid]
+        if v < j:
+            lo = mid + 1
+        else:
+            hi = mid
+    if lo < b and nbr[lo] == j:
+        return lo
+    return -1
+
+
+@pjit
+def transfer_history(old_start, old_nbr, new_start, new_nbr, old_f, new_f, old_i, new_i):
+    """Copy per-pair history (float columns ``old_f`` (M, K), int columns ``old_i`` (M, L)) from
+    the old to the new half list; new pairs get zeros."""
+    n = new_start.shape[0] - 1
+    kf = old_f.shape[1]
+    ki = old_i.shape[1]
+    for i in prange(n):
+        a0 = old_start[i]
+        b0 = old_start[i + 1]
+        for k in range(new_start[i], new_start[i + 1]):
+            q = _find(old_nbr, a0, b0, new_nbr[k])
+            if q >= 0:
+                for c in range(kf):
+                    new_f[k, c] = old_f[q, c]
+                for c in range(ki):
+                    new_i[k, c] = old_i[q, c]
+            else:
+                for c in range(kf):
+                    new_f[k, c] = 0.0
+                for c in range(ki):
+                    new_i[k, c] = 0
+
+
+@jit
+def lost_bonds(old_start, old_nbr, new_start, new_nbr, old_i):
+    """Number of active bonds of the old list that are absent from the new one."""
+    n = new_start.shape[0] - 1
+    lost = 0
+    for i in range(n):
+        for q in range(old_start[i], old_start[i + 1]):
+            if old_i.shape[1] > 0 and old_i[q, 0] == BOND_ACTIVE:
+                if _find(new_nbr, new_start[i], new_start[i + 1], old_nbr[q]) < 0:
+                    lost += 1
+    return lost
+
+
+@jit
+def transpose(row_start, nbr, n):
+    """CSR of pair indices by second particle j, each list in increasing pair index."""
+    m = nbr.shape[0]
+    t_start = np.zeros(n + 1, np.int64)
+    for k in range(m):
+        t_start[nbr[k] + 1] += 1
+    for i in range(n):
+        t_start[i + 1] += t_start[i]
+    fill = t_start[:-1].copy()
+    t_pair = np.empty(m, np.int64)
+    for k in range(m):
+        j = nbr[k]
+        t_pair[fill[j]] = k
+        fill[j] += 1
+    return t_start, t_pair
+
+
+# ----------------------------------------------------------------------------------------------
+# pair forces
+# ----------------------------------------------------------------------------------------------
+# per-pair float history columns
+H_FS = 0  # 0..2 shear spring (force on j) [N]
+H_N = 3  # 3..5 unit normal of the last step (0 = new contact)
+H_FN = 6  # normal force [N] (compression > 0)
+H_NCOL_BASIC = 7
+# cohesive / moment extension columns
+H_AN = 7  # normal adhesion [N]
+H_AT = 8  # shear adhesion [N]
+H_UNP = 9  # plastic normal displacement [m]
+H_MB = 10  # 10..12 bending / rolling moment on j [N m]
+H_MT = 13  # 13..15 twisting moment on j [N m]
+H_NCOL_FULL = 16
+# per-pair int history columns
+I_BOND = 0
+
+
+@pjit
+def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, dt, has_rot,
+                has_coh, has_roll, has_visc, e_fric, e_visc, e_bond):
+    """Contact forces of the half neighbour list, written per pair.
+
+    For each pair k = (i, j): ``hf[k]`` holds the shear spring, normal and normal force (the
+    force on j is fn n + Fs; on i its opposite). With rotations, ``tq[k, 0:3]`` / ``tq[k, 3:6]``
+    receive the torques on i / j. Dissipation is accumulated on the row owner i.
+
+    Notes
+    -----
+    Cundall-Strack linear law (Yade ``Law2_ScGeom_FrictPhys_CundallStrack``), cohesive moment
+    law (Yade ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment``), rolling resistance (Ai et al. 2011
+    type C); stiffness from ``soil.contact_laws``.
+    """
+    n = x.shape[0]
+    for i in prange(n):
+        ri = radius[i]
+        mi = mat_id[i]
+        ei = mat[mi, M_YOUNG]
+        nui = mat[mi, M_RATIO]
+        tpi = mat[mi, M_TANPHI]
+        xi0 = x[i, 0]
+        xi1 = x[i, 1]
+        xi2 = x[i, 2]
+        fric_acc = 0.0
+        visc_acc = 0.0
+        bond_acc = 0.0
+        for k in range(row_start[i], row_start[i + 1]):
+            j = nbr[k]
+            dx = x[j, 0] - xi0
+            dy = x[j, 1] - xi1
+            dz = x[j, 2] - xi2
+            rj = radius[j]
+            d2 = dx * dx + dy * dy + dz * dz
+            rs = ri + rj
+            bonded = False
+            if has_coh:
+                bonded = hi[k, I_BOND] == BOND_ACTIVE
+            if not bonded and d2 >= rs * rs:
+                if hf[k, H_N] != 0.0 or hf[k, H_N + 1] != 0.0 or hf[k, H_N + 2] != 0.0:
+                    for c in range(hf.shape[1]):
+                        hf[k, c] = 0.0
+                    if has_rot:
+                        for c in range(6):
+                            tq[k, c] = 0.0
+                continue
+            dist = math.sqrt(d2)
+            inv_d = 1.0 / dist
+            nx = dx * inv_d
+            ny = dy * inv_d
+            nz = dz * inv_d
+            delta = rs - dist
+            mj = mat_id[j]
+            ej = mat[mj, M_YOUNG]
+            kn = normal_stiffness(ei, ri, ej, rj)
+            ks = shear_stiffness(ei, ri, nui, ej, rj, mat[mj, M_RATIO])
+            tan_phi = min(tpi, mat[mj, M_TANPHI])
+            n0x = hf[k, H_N]
+            n0y = hf[k, H_N + 1]
+            n0z = hf[k, H_N + 2]
+            if n0x == 0.0 and n0y == 0.0 and n0z == 0.0:
+                n0x = nx
+                n0y = ny
+                n0z = nz
+            # relative velocity of j w.r.t. i at the contact point
+            vrx = v[j, 0] - v[i, 0]
+            vry = v[j, 1] - v[i, 1]
+            vrz = v[j, 2] - v[i, 2]
+            twist = 0.0
+            ai = ri - 0.5 * delta
+            aj = rj - 0.5 * delta
+            if has_rot:
+                # w_j x (-aj n) - w_i x (ai n)
+                sx = -(aj * w[j, 0] + ai * w[i, 0])
+                sy = -(aj * w[j, 1] + ai * w[i, 1])
+                sz = -(aj * w[j, 2] + ai * w[i, 2])
+                vrx += sy * nz - sz * ny
+                vry += sz * nx - sx * nz
+                vrz += sx * ny - sy * nx
+                twist = 0.5 * dt * (nx * (w[i, 0] + w[j, 0]) + ny * (w[i, 1] + w[j, 1])
+                                    + nz * (w[i, 2] + w[j, 2]))
+            vn = vrx * nx + vry * ny + vrz * nz
+            delta_dot = -vn
+            ox, oy, oz = rotate_shear(hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
+                                      n0x, n0y, n0z, nx, ny, nz, twist)
+            dux = (vrx - vn * nx) * dt
+            duy = (vry - vn * ny) * dt
+            duz = (vrz - vn * nz) * dt
+            fsx = ox - ks * dux
+            fsy = oy - ks * duy
+            fsz = oz - ks * duz
+            if bonded:
+                an = hf[k, H_AN]
+                at = hf[k, H_AT]
+                plastic = mat[mi, M_PLASTIC] > 0.0 and mat[mj, M_PLASTIC] > 0.0
+                unp = hf[k, H_UNP]
+                fn, unp_new, broken_n, wp = cohesive_normal_force(kn, delta, unp, an, plastic)
+                bond_acc += wp
+                if broken_n:
+                    # elastic energy released by the broken tensile spring
+                    bond_acc += 0.5 * an * an / kn
+                    bonded = False
+                    hi[k, I_BOND] = BOND_NONE
+                    at = 0.0
+                    hf[k, H_AN] = 0.0
+                    hf[k, H_AT] = 0.0
+                    unp_new = 0.0
+                hf[k, H_UNP] = unp_new
+                fsx, fsy, fsz, _d, broken_s = cohesive_shear_cap(fsx, fsy, fsz, fn, tan_phi,
+                                                                 at, bonded, ks)
+                fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
+                if broken_s:
+                    bonded = False
+                    hi[k, I_BOND] = BOND_NONE
+                    hf[k, H_AN] = 0.0
+                    hf[k, H_AT] = 0.0
+                    hf[k, H_UNP] = 0.0
+                    if fn < 0.0:
+                        bond_acc += 0.5 * fn * fn / kn
+                        fn = 0.0
+                if not bonded and delta <= 0.0:
+                    # bond gone and spheres apart: the contact no longer exists
+                    for c in range(hf.shape[1]):
+                        hf[k, c] = 0.0
+                    if has_rot:
+                        for c in range(6):
+                            tq[k, c] = 0.0
+                    continue
+            else:
+                cn = 0.0
+                if has_visc:
+                    e_pair = min(mat[mi, M_RESTITUTION], mat[mj, M_RESTITUTION])
+                    if e_pair < 1.0:
+                        m_eff = mass[i] * mass[j] / (mass[i] + mass[j])
+                        cn = damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                fn_old = hf[k, H_FN]
+                fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot)
+                if cn > 0.0:
+                    visc_acc += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
+                fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
+                fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
+            hf[k, H_FS] = fsx
+            hf[k, H_FS + 1] = fsy
+            hf[k, H_FS + 2] = fsz
+            hf[k, H_N] = nx
+            hf[k, H_N + 1] = ny
+            hf[k, H_N + 2] = nz
+            hf[k, H_FN] = fn
+            if has_rot:
+                fx = fn * nx + fsx
+                fy = fn * ny + fsy
+                fz = fn * nz + fsz
+                # torque on j: (-aj n) x F ; on i: (ai n) x (-F)
+                tjx = -aj * (ny * fz - nz * fy)
+                tjy = -aj * (nz * fx - nx * fz)
+                tjz = -aj * (nx * fy - ny * fx)
+                tix = -ai * (ny * fz - nz * fy)
+                tiy = -ai * (nz * fx - nx * fz)
+                tiz = -ai * (nx * fy - ny * fx)
+                mx = 0.0
+                my = 0.0
+                mz = 0.0
+                use_coh_m = bonded and mat[mi, M_MOMENTS] > 0.0 and mat[mj, M_MOMENTS] > 0.0
+                mu_ri = mat[mi, M_MU_R]
+                mu_rj = mat[mj, M_MU_R]
+                use_roll = has_roll and (not use_coh_m) and (mu_ri >= 0.0 or mu_rj >= 0.0)
+                if use_coh_m or use_roll:
+                    wrx = w[j, 0] - w[i, 0]
+                    wry = w[j, 1] - w[i, 1]
+                    wrz = w[j, 2] - w[i, 2]
+                    wn = wrx * nx + wry * ny + wrz * nz
+                    mox, moy, moz = rotate_shear(hf[k, H_MB], hf[k, H_MB + 1], hf[k, H_MB + 2],
+                                                 n0x, n0y, n0z, nx, ny, nz, twist)
+                    dtx = (wrx - wn * nx) * dt
+                    dty = (wry - wn * ny) * dt
+                    dtz = (wrz - wn * nz) * dt
+                    if use_coh_m:
+                        a1 = mat[mi, M_AKR]
+                        a2 = mat[mj, M_AKR]
+                        akr = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                        a1 = mat[mi, M_AKTW]
+                        a2 = mat[mj, M_AKTW]
+                        aktw = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                        kb = akr * ks * ri * rj
+                        kt = aktw * ks * ri * rj
+                        mbx = mox - kb * dtx
+                        mby = moy - kb * dty
+                        mbz = moz - kb * dtz
+                        mt_old = (hf[k, H_MT] * nx + hf[k, H_MT + 1] * ny + hf[k, H_MT + 2] * nz)
+                        mt = mt_old - kt * wn * dt
+                        cap_b = -1.0
+                        e1 = mat[mi, M_ETA_R]
+                        e2 = mat[mj, M_ETA_R]
+                        if e1 >= 0.0 and e2 >= 0.0:
+                            cap_b = min(e1 * ri, e2 * rj) * abs(fn)
+                        cap_t = -1.0
+                        e1 = mat[mi, M_ETA_T]
+                        e2 = mat[mj, M_ETA_T]
+                        if e1 >= 0.0 and e2 >= 0.0:
+                            cap_t = min(e1 * ri, e2 * rj) * abs(fn)
+                        if kb > 0.0:
+                            mbx, mby, mbz, _d = moment_cap(mbx, mby, mbz, cap_b, kb)
+                            fric_acc += spring_dissipation(mox, moy, moz, mbx, mby, mbz,
+                                                           dtx, dty, dtz, kb)
+                        if kt > 0.0 and cap_t >= 0.0 and abs(mt) > cap_t:
+                            mc = cap_t if mt > 0.0 else -cap_t
+                            fric_acc += spring_dissipation(mt_old, 0.0, 0.0, mc, 0.0, 0.0,
+                                                           wn * dt, 0.0, 0.0, kt)
+                            mt = mc
+                        hf[k, H_MT] = mt * nx
+                        hf[k, H_MT + 1] = mt * ny
+                        hf[k, H_MT + 2] = mt * nz
+                        mx = mbx + mt * nx
+                        my = mby + mt * ny
+                        mz = mbz + mt * nz
+                    else:
+                        mu_r = mu_ri
+                        if mu_r < 0.0 or (mu_rj >= 0.0 and mu_rj < mu_r):
+                            mu_r = mu_rj
+                        r_eff = ri * rj / (ri + rj)
+                        kr = rolling_stiffness(kn, mu_r, r_eff)
+                        mbx = mox - kr * dtx
+                        mby = moy - kr * dty
+                        mbz = moz - kr * dtz
+                        if kr > 0.0:
+                            mbx, mby, mbz, _d = moment_cap(mbx, mby, mbz,
+                                                           mu_r * r_eff * abs(fn), kr)
+                            fric_acc += spring_dissipation(mox, moy, moz, mbx, mby, mbz,
+                                                           dtx, dty, dtz, kr)
+                        mx = mbx
+                        my = mby
+                        mz = mbz
+                    hf[k, H_MB] = mbx
+                    hf[k, H_MB + 1] = mby
+                    hf[k, H_MB + 2] = mbz
+                tq[k, 0] = tix - mx
+                tq[k, 1] = tiy - my
+                tq[k, 2] = tiz - mz
+                tq[k, 3] = tjx + mx
+                tq[k, 4] = tjy + my
+                tq[k, 5] = tjz + mz
+        e_fric[i] += fric_acc
+        e_visc[i] += visc_acc
+        e_bond[i] += bond_acc
+
+
+@pjit
+def gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot):
+    """Per-particle sum of gravity and pair forces (and torques) in a fixed order."""
+    n = mass.shape[0]
+    g0 = gravity[0]
+    g1 = gravity[1]
+    g2 = gravity[2]
+    for i in prange(n):
+        fx = 0.0
+        fy = 0.0
+        fz = 0.0
+        tx = 0.0
+        ty = 0.0
+        tz = 0.0
+        for k in range(row_start[i], row_start[i + 1]):
+            fn = hf[k, H_FN]
+            fx -= fn * hf[k, H_N] + hf[k, H_FS]
+            fy -= fn * hf[k, H_N + 1] + hf[k, H_FS + 1]
+            fz -= fn * hf[k, H_N + 2] + hf[k, H_FS + 2]
+            if has_rot:
+                tx += tq[k, 0]
+                ty += tq[k, 1]
+                tz += tq[k, 2]
+        for q in range(t_start[i], t_start[i + 1]):
+            k = t_pair[q]
+            fn = hf[k, H_FN]
+            fx += fn * hf[k, H_N] + hf[k, H_FS]
+            fy += fn * hf[k, H_N + 1] + hf[k, H_FS + 1]
+            fz += fn * hf[k, H_N + 2] + hf[k, H_FS + 2]
+            if has_rot:
+                tx += tq[k, 3]
+                ty += tq[k, 4]
+                tz += tq[k, 5]
+        m = mass[i]
+        f[i, 0] = fx + m * g0
+        f[i, 1] = fy + m * g1
+        f[i, 2] = fz + m * g2
+        t[i, 0] = tx
+        t[i, 1] = ty
+        t[i, 2] = tz
+
+
+# ----------------------------------------------------------------------------------------------
+# boundary contacts
+# ----------------------------------------------------------------------------------------------
+@numba.njit(cache=True, inline="always")
+def _elem_contact(xp, yp, zp, r, etype, ep, en, er, ea0, ea1, e):
+    """Geometry of analytic element ``e``: returns (touch, nx, ny, nz, delta)."""
+    ty = etype[e]
+    if ty == E_PLANE:
+        dist = (xp - ep[e, 0]) * en[e, 0] + (yp - ep[e, 1]) * en[e, 1] + (zp - ep[e, 2]) * en[e, 2]
+        delta = r - dist
+        if delta > 0.0:
+            return True, en[e, 0], en[e, 1], en[e, 2], delta
+        return False, 0.0, 0.0, 0.0, 0.0
+    if ty == E_CYLINDER:
+        rx = xp - ep[e, 0]
+        ry = yp - ep[e, 1]
+        rz = zp - ep[e, 2]
+        ax = rx * en[e, 0] + ry * en[e, 1] + rz * en[e, 2]
+        if ax < ea0[e] or ax > ea1[e]:
+            return False, 0.0, 0.0, 0.0, 0.0
+        px = rx - ax * en[e, 0]
+        py = ry - ax * en[e, 1]
+        pz = rz - ax * en[e, 2]
+        rho2 = px * px + py * py + pz * pz
+        lim = er[e] - r
+        if lim > 0.0 and rho2 <= lim * lim:
+            return False, 0.0, 0.0, 0.0, 0.0
+        rho = math.sqrt(rho2)
+        delta = r - (er[e] - rho)
+        if delta > 0.0 and rho > 0.0:
+            return True, -px / rho, -py / rho, -pz / rho, delta
+        return False, 0.0, 0.0, 0.0, 0.0
+    if ty == E_SPHERE:
+        rx = xp - ep[e, 0]
+        ry = yp - ep[e, 1]
+        rz = zp - ep[e, 2]
+        d2 = rx * rx + ry * ry + rz * rz
+        rs = r + er[e]
+        if d2 < rs * rs and d2 > 0.0:
+            d = math.sqrt(d2)
+            return True, rx / d, ry / d, rz / d, rs - d
+        return False, 0.0, 0.0, 0.0, 0.0
+    return False, 0.0, 0.0, 0.0, 0.0
+
+
+@pjit
+def analytic_contacts_count(x, radius, etype, ep, en, er, ea0, ea1, counts):
+    n = x.shape[0]
+    ne = etype.shape[0]
+    for i in prange(n):
+        c = 0
+        xp = x[i, 0]
+        yp = x[i, 1]
+        zp = x[i, 2]
+        r = radius[i]
+        for e in range(ne):
+            ok, _a, _b, _c, _d = _elem_contact(xp, yp, zp, r, etype, ep, en, er, ea0, ea1, e)
+            if ok:
+                c += 1
+        counts[i] = c
+
+
+@pjit
+def analytic_contacts_fill(x, radius, etype, ep, en, er, ea0, ea1, start, c_p, c_e, c_n, c_d,
+                           c_pt):
+    """Fill contacts in (particle, element) order; normal from the wall to the particle; the
+    contact point sits mid-overlap, x - (r - delta/2) n."""
+    n = x.shape[0]
+    ne = etype.shape[0]
+    for i in prange(n):
+        q = start[i]
+        if q == start[i + 1]:
+            continue
+        xp = x[i, 0]
+        yp = x[i, 1]
+        zp = x[i, 2]
+        r = radius[i]
+        for e in range(ne):
+            ok, nx, ny, nz, delta = _elem_contact(xp, yp, zp, r, etype, ep, en, er, ea0, ea1, e)
+            if ok:
+                c_p[q] = i
+                c_e[q] = e
+                c_n[q, 0] = nx
+                c_n[q, 1] = ny
+                c_n[q, 2] = nz
+                c_d[q] = delta
+                a = r - 0.5 * delta
+                c_pt[q, 0] = xp - a * nx
+                c_pt[q, 1] = yp - a * ny
+                c_pt[q, 2] = zp - a * nz
+                q += 1
+
+
+@jit
+def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt, key_mult,
+                    etype, er, ebody, b_mat, b_pos, b_vel, b_omg, b_ref, old_key, old_hist,
+                    new_key, new_hist, f, t, b_force, b_torque, b_power, b_diss, dt, has_rot,
+                    has_visc, has_roll):
+    """Forces of boundary contacts (sorted by key), history carried by key (particle, element).
+
+    ``new_hist[c]`` = (Fs[3], n[3], fn, kn, ks, M_roll[3], kr). Adds forces/torques to particles, the wrench
+    (about the body's reference point) and power to bodies, dissipation to ``b_diss[body]``
+    (friction, viscous).
+
+    Notes
+    -----
+    Cundall-Strack law on walls (Yade ``Law2_ScGeom_FrictPhys_CundallStrack`` with
+    ``Ig2_Wall_Sphere_ScGeom`` / ``Ig2_Facet_Sphere_ScGeom``); wall side stiffness radius: r for
+    planes/cylinders, 2r for facets, R for a rigid sphere.
+    """
+    nc = c_p.shape[0]
+    n_old = old_key.shape[0]
+    for c in range(nc):
+        i = c_p[c]
+        e = c_e[c]
+        key = i * key_mult + e
+        new_key[c] = key
+        # binary search in the old keys
+        lo = 0
+        hi = n_old
+        while lo < hi:
+            mid = (lo + hi) >> 1
+            if old_key[mid] < key:
+                lo = mid + 1
+            else:
+                hi = mid
+        nx = c_n[c, 0]
+        ny = c_n[c, 1]
+        nz = c_n[c, 2]
+        if lo < n_old and old_key[lo] == key:
+            fsx0 = old_hist[lo, 0]
+            fsy0 = old_hist[lo, 1]
+            fsz0 = old_hist[lo, 2]
+            n0x = old_hist[lo, 3]
+            n0y = old_hist[lo, 4]
+            n0z = old_hist[lo, 5]
+        else:
+            fsx0 = 0.0
+            fsy0 = 0.0
+            fsz0 = 0.0
+            n0x = nx
+            n0y = ny
+            n0z = nz
+        b = ebody[e]
+        ri = radius[i]
+        delta = c_d[c]
+        mi = mat_id[i]
+        mb = b_mat[b]
+        ty = etype[e]
+        if ty == E_SPHERE:
+            rw = er[e]
+        elif ty == E_FACET:
+            rw = 2.0 * ri
+        else:
+            rw = ri
+        kn = normal_stiffness(mat[mb, M_YOUNG], rw, mat[mi, M_YOUNG], ri)
+        ks = shear_stiffness(mat[mb, M_YOUNG], rw, mat[mb, M_RATIO], mat[mi, M_YOUNG], ri,
+                             mat[mi, M_RATIO])
+        tan_phi = min(mat[mb, M_TANPHI], mat[mi, M_TANPHI])
+        px = c_pt[c, 0]
+        py = c_pt[c, 1]
+        pz = c_pt[c, 2]
+        # body velocity at the contact point
+        qx = px - b_pos[b, 0]
+        qy = py - b_pos[b, 1]
+        qz = pz - b_pos[b, 2]
+        vbx = b_vel[b, 0] + b_omg[b, 1] * qz - b_omg[b, 2] * qy
+        vby = b_vel[b, 1] + b_omg[b, 2] * qx - b_omg[b, 0] * qz
+        vbz = b_vel[b, 2] + b_omg[b, 0] * qy - b_omg[b, 1] * qx
+        # particle velocity at the contact point
+        vrx = v[i, 0] - vbx
+        vry = v[i, 1] - vby
+        vrz = v[i, 2] - vbz
+        ax = px - x[i, 0]
+        ay = py - x[i, 1]
+        az = pz - x[i, 2]
+        twist = 0.0
+        if has_rot:
+            vrx += w[i, 1] * az - w[i, 2] * ay
+            vry += w[i, 2] * ax - w[i, 0] * az
+            vrz += w[i, 0] * ay - w[i, 1] * ax
+            twist = 0.5 * dt * (nx * (w[i, 0] + b_omg[b, 0]) + ny * (w[i, 1] + b_omg[b, 1])
+                                + nz * (w[i, 2] + b_omg[b, 2]))
+        vn = vrx * nx + vry * ny + vrz * nz
+        delta_dot = -vn
+        ox, oy, oz = rotate_shear(fsx0, fsy0, fsz0, n0x, n0y, n0z, nx, ny, nz, twist)
+        dux = (vrx - vn * nx) * dt
+        duy = (vry - vn * ny) * dt
+        duz = (vrz - vn * nz) * dt
+        fsx = ox - ks * dux
+        fsy = oy - ks * duy
+        fsz = oz - ks * duz
+        cn = 0.0
+        if has_visc:
+            e_pair = min(mat[mb, M_RESTITUTION], mat[mi, M_RESTITUTION])
+            if e_pair < 1.0:
+                cn = damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+        fn_old = 0.0
+        mox = 0.0
+        moy = 0.0
+        moz = 0.0
+        if lo < n_old and old_key[lo] == key:
+            fn_old = old_hist[lo, 6]
+            mox = old_hist[lo, 9]
+            moy = old_hist[lo, 10]
+            moz = old_hist[lo, 11]
+        fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot)
+        fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
+        b_diss[b, 0] += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
+        if cn > 0.0:
+            b_diss[b, 1] += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
+        new_hist[c, 0] = fsx
+        new_hist[c, 1] = fsy
+        new_hist[c, 2] = fsz
+        new_hist[c, 3] = nx
+        new_hist[c, 4] = ny
+        new_hist[c, 5] = nz
+        new_hist[c, 6] = fn
+        new_hist[c, 7] = kn
+        new_hist[c, 8] = ks
+        # rolling resistance on the wall (Ai et al. 2011 type C), moment acting on the particle
+        mrx = 0.0
+        mry = 0.0
+        mrz = 0.0
+        kr = 0.0
+        if has_roll and has_rot:
+            mu_r = mat[mi, M_MU_R]
+            mu_b = mat[mb, M_MU_R]
+            if mu_r < 0.0 or (mu_b >= 0.0 and mu_b < mu_r):
+                mu_r = mu_b
+            if mu_r >= 0.0:
+                r_eff = ri * er[e] / (ri + er[e]) if ty == E_SPHERE else ri
+                kr = rolling_stiffness(kn, mu_r, r_eff)
+                wrx = w[i, 0] - b_omg[b, 0]
+                wry = w[i, 1] - b_omg[b, 1]
+                wrz = w[i, 2] - b_omg[b, 2]
+                wn = wrx * nx + wry * ny + wrz * nz
+                rox, roy, roz = rotate_shear(mox, moy, moz, n0x, n0y, n0z, nx, ny, nz, twist)
+                dtx = (wrx - wn * nx) * dt
+                dty = (wry - wn * ny) * dt
+                dtz = (wrz - wn * nz) * dt
+                mrx = rox - kr * dtx
+                mry = roy - kr * dty
+                mrz = roz - kr * dtz
+                if kr > 0.0:
+                    mrx, mry, mrz, _d = moment_cap(mrx, mry, mrz, mu_r * r_eff * abs(fn), kr)
+                    b_diss[b, 0] += spring_dissipation(rox, roy, roz, mrx, mry, mrz, dtx, dty,
+                                                       dtz, kr)
+        new_hist[c, 9] = mrx
+        new_hist[c, 10] = mry
+        new_hist[c, 11] = mrz
+        new_hist[c, 12] = kr
+        fx = fn * nx + fsx
+        fy = fn * ny + fsy
+        fz = fn * nz + fsz
+        f[i, 0] += fx
+        f[i, 1] += fy
+        f[i, 2] += fz
+        if has_rot:
+            t[i, 0] += ay * fz - az * fy + mrx
+            t[i, 1] += az * fx - ax * fz + mry
+            t[i, 2] += ax * fy - ay * fx + mrz
+        b_force[b, 0] -= fx
+        b_force[b, 1] -= fy
+        b_force[b, 2] -= fz
+        hx = px - b_ref[b, 0]
+        hy = py - b_ref[b, 1]
+        hz = pz - b_ref[b, 2]
+        b_torque[b, 0] -= hy * fz - hz * fy + mrx
+        b_torque[b, 1] -= hz * fx - hx * fz + mry
+        b_torque[b, 2] -= hx * fy - hy * fx + mrz
+        b_power[b] += (fx * vbx + fy * vby + fz * vbz
+                       + mrx * b_omg[b, 0] + mry * b_omg[b, 1] + mrz * b_omg[b, 2])
+
+
+# ----------------------------------------------------------------------------------------------
+# diagnostics
+# ----------------------------------------------------------------------------------------------
+@jit
+def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh, has_mom):
+    """Elastic energy stored in the pair springs: normal + shear (+ moment) [J].
+
+    Notes
+    -----
+    Linear springs: kn delta^2 / 2 (bonds: kn (delta - u_p)^2 / 2), |Fs|^2 / (2 ks),
+    |M|^2 / (2 k_M).
+    """
+    n = x.shape[0]
+    e_n = 0.0
+    e_s = 0.0
+    e_m = 0.0
+    for i in range(n):
+        ri = radius[i]
+        mi = mat_id[i]
+        for k in range(row_start[i], row_start[i + 1]):
+            if hf[k, H_N] == 0.0 and hf[k, H_N + 1] == 0.0 and hf[k, H_N + 2] == 0.0:
+                continue
+            j = nbr[k]
+            rj = radius[j]
+            mj = mat_id[j]
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            delta = ri + rj - math.sqrt(dx * dx + dy * dy + dz * dz)
+            kn = normal_stiffness(mat[mi, M_YOUNG], ri, mat[mj, M_YOUNG], rj)
+            ks = shear_stiffness(mat[mi, M_YOUNG], ri, mat[mi, M_RATIO], mat[mj, M_YOUNG], rj,
+                                 mat[mj, M_RATIO])
+            bonded = has_coh and hi[k, I_BOND] == BOND_ACTIVE
+            if bonded:
+                u = delta - hf[k, H_UNP]
+                e_n += 0.5 * kn * u * u
+            elif delta > 0.0:
+                e_n += 0.5 * kn * delta * delta
+            if ks > 0.0:
+                e_s += 0.5 * (hf[k, 0] ** 2 + hf[k, 1] ** 2 + hf[k, 2] ** 2) / ks
+            if has_mom:
+                mb2 = hf[k, H_MB] ** 2 + hf[k, H_MB + 1] ** 2 + hf[k, H_MB + 2] ** 2
+                mt2 = hf[k, H_MT] ** 2 + hf[k, H_MT + 1] ** 2 + hf[k, H_MT + 2] ** 2
+                if mb2 > 0.0 or mt2 > 0.0:
+                    if bonded and mat[mi, M_MOMENTS] > 0.0 and mat[mj, M_MOMENTS] > 0.0:
+                        a1 = mat[mi, M_AKR]
+                        a2 = mat[mj, M_AKR]
+                        akr = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                        a1 = mat[mi, M_AKTW]
+                        a2 = mat[mj, M_AKTW]
+                        aktw = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                        if akr > 0.0:
+                            e_m += 0.5 * mb2 / (akr * ks * ri * rj)
+                        if aktw > 0.0:
+                            e_m += 0.5 * mt2 / (aktw * ks * ri * rj)
+                    else:
+                        mu_r = mat[mi, M_MU_R]
+                        mu_rj = mat[mj, M_MU_R]
+                        if mu_r < 0.0 or (mu_rj >= 0.0 and mu_rj < mu_r):
+                            mu_r = mu_rj
+                        r_eff = ri * rj / (ri + rj)
+                        kr = rolling_stiffness(kn, mu_r, r_eff)
+                        if kr > 0.0:
+                            e_m += 0.5 * mb2 / kr
+    return e_n, e_s, e_m
+
+
+@jit
+def stiffness_sum(x, radius, mat_id, mat, row_start, nbr, c_p, c_kn, ksum):
+    """Sum of normal stiffnesses of touching contacts per particle (for the time step)."""
+    n = x.shape[0]
+    for i in range(n):
+        ri = radius[i]
+        for k in range(row_start[i], row_start[i + 1]):
+            j = nbr[k]
+            rj = radius[j]
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            if dx * dx + dy * dy + dz * dz < (ri + rj) ** 2:
+                kn = normal_stiffness(mat[mat_id[i], M_YOUNG], ri, mat[mat_id[j], M_YOUNG], rj)
+                ksum[i] += kn
+                ksum[j] += kn
+    for c in range(c_p.shape[0]):
+        ksum[c_p[c]] += c_kn[c]
+
+
+@jit
+def bond_touching(x, radius, mat_id, mat, row_start, nbr, hf, hi, tol):
+    """Create bonds on touching (gap <= tol) pairs of cohesive materials (Yade setCohesionNow).
+
+    Returns the number of bonds created.
+
+    Notes
+    -----
+    Yade ``Ip2_CohFrictMat_CohFrictMat_CohFrictPhys``: a_n = min(sn_i, sn_j) min(R_i, R_j)^2,
+    a_t = min(ss_i, ss_j) min(R_i, R_j)^2; the current overlap is kept as the reference (u_p = 0
+    keeps the present normal force).
+    """
+    n = x.shape[0]
+    made = 0
+    for i in range(n):
+        ri = radius[i]
+        mi = mat_id[i]
+        for k in range(row_start[i], row_start[i + 1]):
+            j = nbr[k]
+            mj = mat_id[j]
+            if mat[mi, M_COHESIVE] <= 0.0 or mat[mj, M_COHESIVE] <= 0.0:
+                continue
+            rj = radius[j]
+            dx = x[j, 0] - x[i, 0]
+            dy = x[j, 1] - x[i, 1]
+            dz = x[j, 2] - x[i, 2]
+            d = math.sqrt(dx * dx + dy * dy + dz * dz)
+            if d - (ri + rj) > tol:
+                continue
+            rmin = min(ri, rj)
+            hi[k, I_BOND] = BOND_ACTIVE
+            hf[k, H_AN] = min(mat[mi, M_SN], mat[mj, M_SN]) * rmin * rmin
+            hf[k, H_AT] = min(mat[mi, M_SS], mat[mj, M_SS]) * rmin * rmin
+            hf[k, H_UNP] = 0.0
+            if hf[k, H_N] == 0.0 and hf[k, H_N + 1] == 0.0 and hf[k, H_N + 2] == 0.0:
+                hf[k, H_N] = dx / d
+                hf[k, H_N + 1] = dy / d
+                hf[k, H_N + 2] = dz / d
+            made += 1
+    return made

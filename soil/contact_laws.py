@@ -1,0 +1,405 @@
+"""Scalar contact laws (Numba), each testable alone.
+
+Conventions: the normal ``n`` points from body i to body j (for a boundary contact: from the
+wall to the particle), the overlap ``delta > 0`` in compression, and the normal force ``fn`` is
+positive in compression (repulsive). Shear springs are stored as forces acting on body j (Yade
+``shearForce``), updated incrementally: ``Fs <- rotate(Fs) - ks * du_s``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numba
+
+jit = functools.partial(numba.njit, cache=True)
+
+__all__ = [
+    "normal_stiffness",
+    "shear_stiffness",
+    "damping_ratio",
+    "damping_coefficient",
+    "rotate_shear",
+    "linear_normal_force",
+    "coulomb_cap",
+    "cohesive_normal_force",
+    "cohesive_shear_cap",
+    "moment_cap",
+    "rolling_stiffness",
+    "contact_duration",
+]
+
+
+@jit
+def normal_stiffness(young_i: float, r_i: float, young_j: float, r_j: float) -> float:
+    """Normal stiffness of two springs in series, k_n = 2 E_i R_i E_j R_j / (E_i R_i + E_j R_j).
+
+    Parameters
+    ----------
+    young_i, young_j : float
+        Young's moduli [Pa].
+    r_i, r_j : float
+        Characteristic radii on each side [m] (sphere radius; wall side: the sphere's own
+        radius; triangle facet side: 2 r).
+
+    Returns
+    -------
+    float
+        k_n [N/m].
+
+    Notes
+    -----
+    Varriale (2019) eqs. 3.2-3.6; Yade ``Ip2_FrictMat_FrictMat_FrictPhys``.
+    """
+    a = young_i * r_i
+    b = young_j * r_j
+    return 2.0 * a * b / (a + b)
+
+
+@jit
+def shear_stiffness(
+    young_i: float, r_i: float, ratio_i: float, young_j: float, r_j: float, ratio_j: float
+) -> float:
+    """Shear stiffness in series form.
+
+    k_s = 2 (E_i R_i v_i)(E_j R_j v_j) / (E_i R_i v_i + E_j R_j v_j).
+
+    ``v`` is the ks/kn ratio (Yade ``FrictMat.poisson``). Equal ratios give k_s = v k_n.
+
+    Returns
+    -------
+    float
+        k_s [N/m]; 0 when either side has ratio 0.
+
+    Notes
+    -----
+    Yade ``Ip2_FrictMat_FrictMat_FrictPhys`` (Ks = 2 Ea Ra Va Eb Rb Vb / (Ea Ra Va + Eb Rb Vb)).
+    """
+    a = young_i * r_i * ratio_i
+    b = young_j * r_j * ratio_j
+    if a + b <= 0.0:
+        return 0.0
+    return 2.0 * a * b / (a + b)
+
+
+@jit
+def damping_ratio(restitution: float) -> float:
+    """zeta = -ln e / sqrt(pi^2 + ln^2 e) for a linear spring-dashpot [-].
+
+    Notes
+    -----
+    Exact restitution of the linear damped oscillator (e.g. Schwager & Poeschel 2007).
+    """
+    if restitution >= 1.0:
+        return 0.0
+    le = math.log(restitution)
+    return -le / math.sqrt(math.pi * math.pi + le * le)
+
+
+@jit
+def damping_coefficient(zeta: float, m_eff: float, kn: float) -> float:
+    """c_n = 2 zeta sqrt(m* k_n) [N s/m].
+
+    Notes
+    -----
+    Critical damping of a linear oscillator scaled by zeta.
+    """
+    return 2.0 * zeta * math.sqrt(m_eff * kn)
+
+
+@jit
+def contact_duration(m_eff: float, kn: float) -> float:
+    """Undamped linear-spring contact duration t_c = pi sqrt(m*/k_n) [s].
+
+    Notes
+    -----
+    Half period of the harmonic oscillator.
+    """
+    return math.pi * math.sqrt(m_eff / kn)
+
+
+@jit
+def rotate_shear(fx, fy, fz, n0x, n0y, n0z, nx, ny, nz, twist):
+    """Carry a tangential spring (force) vector with the contact frame.
+
+    Parameters
+    ----------
+    fx, fy, fz : float
+        Shear spring of the previous step.
+    n0x, n0y, n0z : float
+        Previous unit normal.
+    nx, ny, nz : float
+        Current unit normal.
+    twist : float
+        Twist angle about the normal during the step [rad] (0.5 dt n.(w_i + w_j)).
+
+    Returns
+    -------
+    tuple of float
+        The rotated spring, projected on the plane normal to ``n``.
+
+    Notes
+    -----
+    Yade ``ScGeom::rotate``: F -= F x (n_prev x n); F -= F x (twist n); then the remaining
+    normal component is removed (the task's projection rule).
+    """
+    # orthonormal axis a = n_prev x n
+    ax = n0y * nz - n0z * ny
+    ay = n0z * nx - n0x * nz
+    az = n0x * ny - n0y * nx
+    cx = fy * az - fz * ay
+    cy = fz * ax - fx * az
+    cz = fx * ay - fy * ax
+    fx -= cx
+    fy -= cy
+    fz -= cz
+    tx = twist * nx
+    ty = twist * ny
+    tz = twist * nz
+    cx = fy * tz - fz * ty
+    cy = fz * tx - fx * tz
+    cz = fx * ty - fy * tx
+    fx -= cx
+    fy -= cy
+    fz -= cz
+    fn = fx * nx + fy * ny + fz * nz
+    return fx - fn * nx, fy - fn * ny, fz - fn * nz
+
+
+@jit
+def linear_normal_force(kn: float, delta: float, cn: float, delta_dot: float):
+    """Linear spring (+ optional dashpot) normal force, no tension.
+
+    Parameters
+    ----------
+    kn : float
+        Normal stiffness [N/m].
+    delta : float
+        Overlap [m] (> 0 in compression).
+    cn : float
+        Dashpot coefficient [N s/m] (0 = undamped).
+    delta_dot : float
+        Overlap rate [m/s] (> 0 approaching).
+
+    Returns
+    -------
+    fn : float
+        Normal force [N], >= 0.
+    f_visc : float
+        Non-elastic part fn - kn delta [N] (its power f_visc * delta_dot is dissipated).
+
+    Notes
+    -----
+    Cundall & Strack (1979); Yade ``Law2_ScGeom_FrictPhys_CundallStrack``. A damped linear
+    spring goes tensile just before separation; the force is clamped at 0 (no tension).
+    """
+    fe = kn * delta
+    fn = fe + cn * delta_dot
+    if fn < 0.0:
+        fn = 0.0
+    return fn, fn - fe
+
+
+@jit
+def coulomb_cap(fx, fy, fz, fn_limit, ks):
+    """Cap a trial shear force at the Coulomb limit |F_s| <= fn_limit.
+
+    Parameters
+    ----------
+    fx, fy, fz : float
+        Trial shear force [N].
+    fn_limit : float
+        Maximum shear force [N] (|F_n| tan phi, plus adhesion for bonds).
+    ks : float
+        Shear stiffness [N/m] (for the dissipated energy).
+
+    Returns
+    -------
+    tuple
+        (fx, fy, fz, dissipated [J], slipped)
+
+    Notes
+    -----
+    Yade ``Law2_ScGeom_FrictPhys_CundallStrack``; plastic dissipation
+    ((trial - capped)/ks) . capped as in Yade's ``plasticDissipation``.
+    """
+    f2 = fx * fx + fy * fy + fz * fz
+    lim = fn_limit if fn_limit > 0.0 else 0.0
+    if f2 <= lim * lim:
+        return fx, fy, fz, 0.0, False
+    f = math.sqrt(f2)
+    s = lim / f
+    cx = fx * s
+    cy = fy * s
+    cz = fz * s
+    diss = 0.0
+    if ks > 0.0:
+        diss = ((fx - cx) * cx + (fy - cy) * cy + (fz - cz) * cz) / ks
+    return cx, cy, cz, diss, True
+
+
+@jit
+def cohesive_normal_force(kn: float, un: float, unp: float, an: float, plastic: bool):
+    """Normal force of a (possibly) bonded contact, compression positive.
+
+    F_n = kn (u_n - u_n^p), limited below by -a_n (tension). Fragile bond (plastic=False):
+    exceeding the limit breaks the bond (returned flag), and the force becomes max(kn u_n, 0).
+    Plastic bond: F_n = -a_n and u_n^p = u_n + a_n / kn.
+
+    Parameters
+    ----------
+    kn : float
+        [N/m]
+    un : float
+        Overlap [m] (negative = gap, tension for a bond).
+    unp : float
+        Plastic normal displacement [m].
+    an : float
+        Normal adhesion [N] (0 = no bond).
+    plastic : bool
+
+    Returns
+    -------
+    tuple
+        (fn [N], unp_new [m], broken [bool], plastic_work [J])
+
+    Notes
+    -----
+    Yade ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment::go`` (normal part); Varriale (2019)
+    section 3.2.3.
+    """
+    fn = kn * (un - unp)
+    if -fn > an:
+        if plastic and an > 0.0:
+            unp_new = un + an / kn
+            return -an, unp_new, False, an * abs(unp_new - unp)
+        # fragile: bond (if any) breaks, purely frictional contact from now on
+        fn = kn * un
+        if fn < 0.0:
+            fn = 0.0
+        return fn, 0.0, an > 0.0, 0.0
+    return fn, unp, False, 0.0
+
+
+@jit
+def cohesive_shear_cap(fx, fy, fz, fn, tan_phi, at, bonded, ks):
+    """Shear limit of a cohesive contact: |F_s| <= a_t + F_n tan(phi) (>= 0).
+
+    A bonded (fragile) contact that reaches the limit breaks: a_t = 0 and the limit becomes
+    max(0, F_n tan phi).
+
+    Returns
+    -------
+    tuple
+        (fx, fy, fz, dissipated [J], broken [bool])
+
+    Notes
+    -----
+    Yade ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment::go`` (shear part, cohesionDisablesFriction
+    = False).
+    """
+    lim = at + fn * tan_phi
+    if lim < 0.0:
+        lim = 0.0
+    f2 = fx * fx + fy * fy + fz * fz
+    if f2 <= lim * lim:
+        return fx, fy, fz, 0.0, False
+    broken = False
+    if bonded:
+        broken = True
+        lim = fn * tan_phi
+        if lim < 0.0:
+            lim = 0.0
+    gx, gy, gz, diss, _ = coulomb_cap(fx, fy, fz, lim, ks)
+    return gx, gy, gz, diss, broken
+
+
+@jit
+def moment_cap(mx, my, mz, m_limit, k):
+    """Cap an elastic moment spring at |M| <= m_limit (m_limit < 0: no cap).
+
+    Returns
+    -------
+    tuple
+        (mx, my, mz, dissipated [J])
+
+    Notes
+    -----
+    Yade ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment`` (etaRoll/etaTwist caps); Ai et al. (2011)
+    type C rolling limit; dissipation ((trial - capped)/k) . capped.
+    """
+    if m_limit < 0.0:
+        return mx, my, mz, 0.0
+    gx, gy, gz, diss, _ = coulomb_cap(mx, my, mz, m_limit, k)
+    return gx, gy, gz, diss
+
+
+@jit
+def rolling_stiffness(kn: float, mu_r: float, r_eff: float) -> float:
+    """Rolling stiffness k_r = 2.25 k_n mu_r^2 R*^2 [N m/rad].
+
+    Notes
+    -----
+    Ai, Chen, Rotter & Ooi (2011), Powder Technol. 206, eq. 11 (type C model).
+    """
+    return 2.25 * kn * mu_r * mu_r * r_eff * r_eff
+
+
+@jit
+def spring_dissipation(ox, oy, oz, fx, fy, fz, dux, duy, duz, k):
+    """Energy dissipated by a capped incremental spring over one step (centred form).
+
+    D = -1/2 (F_old + F_new) . du - (|F_new|^2 - |F_old|^2) / (2 k): the trapezoidal work put
+    into the spring minus the change of its stored energy. It is exactly 0 while the spring
+    sticks, equals Yade's ((trial - capped)/k) . capped in steady sliding, and, unlike Yade's
+    form, stays second-order consistent with the leapfrog kinetic energy when the cap varies in
+    time (Yade's form lags half a step: an O(dt) ledger error in impacts).
+
+    Parameters
+    ----------
+    ox, oy, oz : float
+        Spring force (or moment) of the previous step, carried to the current frame.
+    fx, fy, fz : float
+        Capped spring force of this step.
+    dux, duy, duz : float
+        Relative displacement (or rotation) increment of this step (F_trial = F_old - k du).
+    k : float
+        Spring stiffness.
+
+    Notes
+    -----
+    Work identity of the leapfrog scheme: KE_{n+1/2} - KE_{n-1/2} = F_n . (x_{n+1} - x_{n-1}) / 2.
+    """
+    if k <= 0.0:
+        return 0.0
+    w = -0.5 * ((ox + fx) * dux + (oy + fy) * duy + (oz + fz) * duz)
+    de = 0.5 * ((fx * fx + fy * fy + fz * fz) - (ox * ox + oy * oy + oz * oz)) / k
+    return w - de
+
+
+@jit
+def normal_dissipation(fn_old, fn, delta, d_delta, kn):
+    """Energy dissipated by a damped normal contact over one step (centred form).
+
+    D = 1/2 (F_old + F_new) d_delta - kn (delta_+^2 - delta_old,+^2) / 2, with
+    delta_old = delta - d_delta and x_+ = max(x, 0): trapezoidal work of the normal force minus the
+    change of the elastic energy (the dashpot power, consistent with the leapfrog work identity).
+
+    Parameters
+    ----------
+    fn_old, fn : float
+        Normal force of the previous and of this step [N].
+    delta : float
+        Overlap now [m]; d_delta : overlap increment of the step [m].
+    kn : float
+        [N/m].
+
+    Notes
+    -----
+    Leapfrog work identity KE_{n+1/2} - KE_{n-1/2} = F_n . (x_{n+1} - x_{n-1}) / 2.
+    """
+    d0 = delta - d_delta
+    e1 = delta if delta > 0.0 else 0.0
+    e0 = d0 if d0 > 0.0 else 0.0
+    return 0.5 * (fn_old + fn) * d_delta - 0.5 * kn * (e1 * e1 - e0 * e0)
