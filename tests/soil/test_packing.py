@@ -1,0 +1,367 @@
+"""Tests of soil.packing: clouds, porosity, deposition, layers, slope, HDF5 and the cache."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import pathlib
+import sys
+
+import h5py
+import numpy as np
+import pytest
+
+# tests/soil has no __init__: under pytest's prepend import mode it would shadow the ``soil``
+# package as a namespace package.  Put the repository root first (as tests/bodies/conftest.py
+# does; a tests/soil/conftest.py or pyproject ``pythonpath = ["."]`` would make this redundant).
+_ROOT = str(pathlib.Path(__file__).resolve().parents[2])
+if sys.path[:1] != [_ROOT]:
+    sys.path.insert(0, _ROOT)
+if getattr(sys.modules.get("soil"), "__file__", "") is None:
+    del sys.modules["soil"]
+
+from soil import packing as pk  # noqa: E402
+from soil.params import Material  # noqa: E402
+
+#: Exact-formula paths (cap volumes, symmetric cuts) agree to round-off.
+ROUNDOFF = 1e-12
+#: Quadrature path (sphere cut by a side face): 32-point Gauss-Legendre per smooth piece,
+#: observed converged to 1e-15 on these cases; 1e-10 leaves margin for other geometries.
+QUADRATURE_REL = 1e-10
+
+SPHERE = 4.0 / 3.0 * math.pi
+
+
+def cap(R: float, h: float) -> float:
+    """Volume of a spherical cap of height h on a sphere of radius R (closed form)."""
+    return math.pi * h * h * (3.0 * R - h) / 3.0
+
+
+def one(region, centre=(0.0, 0.0, 0.0), R=1.0) -> float:
+    return float(pk.sphere_volumes_in_region(np.array([centre], float), np.array([R]), region)[0])
+
+
+# --------------------------------------------------------------------------------------------
+# porosity measurement
+# --------------------------------------------------------------------------------------------
+
+
+def test_cap_volume_top_plane():
+    """Oracle: sphere-plane cap volume pi h^2 (3R - h) / 3 (sphere cut by the top face)."""
+    box = pk.BoxRegion((-5, -5, -5), (5, 5, 0.3))
+    assert one(box) == pytest.approx(SPHERE - cap(1.0, 0.7), rel=ROUNDOFF)
+
+
+@pytest.mark.parametrize("axis", [0, 1])
+def test_cap_volume_side_plane_quadrature(axis):
+    """Oracle: the same cap through a side face, computed by the section-area quadrature."""
+    hi = [5.0, 5.0, 5.0]
+    hi[axis] = 0.3
+    box = pk.BoxRegion((-5, -5, -5), tuple(hi))
+    assert one(box) == pytest.approx(SPHERE - cap(1.0, 0.7), rel=QUADRATURE_REL)
+
+
+def test_two_opposite_side_planes():
+    """Oracle: two disjoint caps removed, V - cap(0.4) - cap(0.3) (inclusion-exclusion)."""
+    box = pk.BoxRegion((-0.6, -5, -5), (0.7, 5, 5))
+    assert one(box) == pytest.approx(SPHERE - cap(1.0, 0.4) - cap(1.0, 0.3), rel=QUADRATURE_REL)
+
+
+def test_edge_and_corner_symmetry():
+    """Oracle: symmetry, a sphere centred on a box edge has V/4 inside, on a corner V/8."""
+    assert one(pk.BoxRegion((0, 0, -5), (5, 5, 5))) == pytest.approx(SPHERE / 4, rel=ROUNDOFF)
+    assert one(pk.BoxRegion((0, 0, 0), (5, 5, 5))) == pytest.approx(SPHERE / 8, rel=ROUNDOFF)
+
+
+def test_cylinder_cut_sphere():
+    """Oracle: a sphere centred on the wall of a huge cylinder tends to a half-space cut (V/2).
+
+    Curvature correction is O(R/Rc); with Rc = 1e4 R the plane-cut value is exact to 1e-4.
+    """
+    Rc = 1.0e4
+    cyl = pk.CylinderRegion((0.0, 0.0), Rc, -5, 5)
+    assert one(cyl, centre=(Rc, 0.0, 0.0)) == pytest.approx(SPHERE / 2, rel=1e-4)
+    # fully inside / outside
+    assert one(cyl, centre=(0.0, 0.0, 0.0)) == pytest.approx(SPHERE, rel=ROUNDOFF)
+    assert one(cyl, centre=(Rc + 2.0, 0.0, 0.0)) == 0.0
+
+
+def test_simple_cubic_lattice_porosity():
+    """Oracle: a simple cubic lattice of touching spheres has solid fraction pi/6 in any control
+    box spanning a whole number of cells, whatever the offset (spheres cut by the faces)."""
+    r = 0.05
+    g = 2 * r * np.arange(-3, 14)
+    X, Y, Z = np.meshgrid(g, g, g, indexing="ij")
+    x = np.stack([X.ravel(), Y.ravel(), Z.ravel()], axis=1)
+    rad = np.full(len(x), r)
+    for off in (0.0, 0.013, 0.037):
+        box = pk.BoxRegion((off, off + 0.02, off + 0.031), (off + 1.0, off + 1.02, off + 1.031))
+        assert pk.porosity(x, rad, box) == pytest.approx(1 - math.pi / 6, abs=QUADRATURE_REL)
+
+
+# --------------------------------------------------------------------------------------------
+# clouds
+# --------------------------------------------------------------------------------------------
+
+
+def _min_gap(x, r):
+    from scipy.spatial import cKDTree
+
+    pairs = cKDTree(x).query_pairs(2 * r.max(), output_type="ndarray")
+    if len(pairs) == 0:
+        return np.inf
+    d = np.linalg.norm(x[pairs[:, 0]] - x[pairs[:, 1]], axis=1)
+    return float((d - r[pairs[:, 0]] - r[pairs[:, 1]]).min())
+
+
+@pytest.mark.parametrize("method", ["lattice", "rsa"])
+@pytest.mark.parametrize(
+    "region",
+    [pk.BoxRegion((0, 0, 0), (1.0, 0.8, 1.2)), pk.CylinderRegion((0.3, -0.2), 0.5, 0.0, 1.5)],
+)
+def test_cloud_non_overlapping_inside_deterministic(method, region):
+    """Oracle: geometry, no two spheres overlap, all lie inside the region, the radii follow
+    r = 0.05 +/- 20 %, and a seed reproduces the cloud bit for bit."""
+    dist = pk.RadiusDistribution(0.05, 0.2)
+    n = 300
+    x, r = pk.random_cloud(region, dist, n, seed=7, method=method)
+    assert x.shape == (n, 3) and r.shape == (n,)
+    assert _min_gap(x, r) >= 0.0
+    assert r.min() >= 0.04 and r.max() <= 0.06
+    if isinstance(region, pk.BoxRegion):
+        assert np.all(x - r[:, None] >= np.array(region.lo) - 1e-12)
+        assert np.all(x + r[:, None] <= np.array(region.hi) + 1e-12)
+    else:
+        d = np.hypot(x[:, 0] - region.center[0], x[:, 1] - region.center[1])
+        assert np.all(d + r <= region.radius + 1e-12)
+        assert np.all((x[:, 2] - r >= region.z_min - 1e-12) & (x[:, 2] + r <= region.z_max + 1e-12))
+    x2, r2 = pk.random_cloud(region, dist, n, seed=7, method=method)
+    assert np.array_equal(x, x2) and np.array_equal(r, r2)
+    x3, _ = pk.random_cloud(region, dist, n, seed=8, method=method)
+    assert not np.array_equal(x, x3)
+
+
+def test_cloud_errors_name_the_problem():
+    """Too many spheres for the region: the error says how many fit."""
+    with pytest.raises(ValueError, match="holds"):
+        pk.lattice_cloud(pk.BoxRegion((0, 0, 0), (0.3, 0.3, 0.3)), pk.RadiusDistribution(0.05), 100)
+    with pytest.raises(ValueError, match="placed"):
+        pk.rsa_cloud(pk.BoxRegion((0, 0, 0), (0.3, 0.3, 0.3)), pk.RadiusDistribution(0.05), 100,
+                     max_attempts=50)
+    with pytest.raises(ValueError, match=r"RadiusDistribution.spread=1.5"):
+        pk.RadiusDistribution(0.05, 1.5)
+    with pytest.raises(ValueError, match=r"BoxRegion.hi\[2\]"):
+        pk.BoxRegion((0, 0, 1), (1, 1, 0.5))
+
+
+def test_discrete_distribution_mean_volume():
+    """Oracle: E[4/3 pi r^3] of a two-size mixture by hand."""
+    d = pk.RadiusDistribution.discrete([0.01, 0.02], [3, 1])
+    assert d.mean == pytest.approx(0.0125, rel=ROUNDOFF)
+    assert d.mean_volume == pytest.approx(SPHERE * (0.75 * 1e-6 + 0.25 * 8e-6), rel=ROUNDOFF)
+    r = d.sample(4000, np.random.default_rng(0))
+    assert set(np.unique(r)) == {0.01, 0.02}
+
+
+# --------------------------------------------------------------------------------------------
+# HDF5 round trip and errors
+# --------------------------------------------------------------------------------------------
+
+
+def _toy_packing() -> pk.Packing:
+    rng = np.random.default_rng(3)
+    x, r = pk.lattice_cloud(pk.BoxRegion((0, 0, 0), (1, 1, 1)), pk.RadiusDistribution(0.05, 0.2),
+                            120, seed=3)
+    mats = (
+        Material(young=2e7, density=2650.0, friction_angle=0.52, name="loose"),
+        Material(young=5e7, density=2650.0, friction_angle=0.3, restitution=0.5, name="dense"),
+    )
+    m = rng.integers(0, 2, len(r)).astype(np.int32)
+    region = pk.BoxRegion((0.1, 0.1, 0.1), (0.9, 0.9, 0.9))
+    return pk.Packing(x, r, m, mats, {"note": "generated in the test", "n": len(r)}, seed=3,
+                      porosity=pk.porosity(x, r, region), porosity_region=region,
+                      info={"steps": 12})
+
+
+def test_hdf5_round_trip_bit_exact(tmp_path):
+    """Save then load gives bit-identical arrays, equal materials, spec, seed and porosity."""
+    a = _toy_packing()
+    path = a.save(tmp_path / "p.h5")
+    b = pk.Packing.load(path)
+    for name in ("x", "radius", "material"):
+        assert np.array_equal(getattr(a, name), getattr(b, name))
+        assert getattr(a, name).dtype == getattr(b, name).dtype
+    assert b.materials == a.materials
+    assert b.spec == a.spec and b.seed == a.seed and b.info == a.info
+    assert b.porosity == a.porosity and b.porosity_region == a.porosity_region
+    assert b.content_hash == a.content_hash
+    with h5py.File(path) as f:
+        assert f["x"].attrs["unit"] == "m"
+
+
+def test_hdf5_missing_field_and_corruption(tmp_path):
+    """Missing dataset/attribute and edited data give errors naming the file and the field."""
+    a = _toy_packing()
+    p1 = a.save(tmp_path / "missing.h5")
+    with h5py.File(p1, "a") as f:
+        del f["radius"]
+    with pytest.raises(ValueError, match=r"missing\.h5.*'radius'"):
+        pk.Packing.load(p1)
+    p2 = a.save(tmp_path / "noattr.h5")
+    with h5py.File(p2, "a") as f:
+        del f.attrs["materials"]
+    with pytest.raises(ValueError, match=r"noattr\.h5.*'materials'"):
+        pk.Packing.load(p2)
+    p3 = a.save(tmp_path / "edited.h5")
+    with h5py.File(p3, "a") as f:
+        f["x"][0, 0] += 1e-9
+    with pytest.raises(ValueError, match=r"edited\.h5.*'content_hash'"):
+        pk.Packing.load(p3)
+    p4 = tmp_path / "garbage.h5"
+    p4.write_bytes(b"not an hdf5 file")
+    with pytest.raises(ValueError, match="garbage.h5"):
+        pk.Packing.load(p4)
+    with pytest.raises(FileNotFoundError, match="nothere.h5"):
+        pk.Packing.load(tmp_path / "nothere.h5")
+
+
+def test_spec_hash_stable_and_sensitive():
+    """The cache key changes with any parameter and not otherwise."""
+    mat = Material(young=2e7, density=2650.0, friction_angle=0.52)
+    kw = dict(container=pk.BoxRegion((0, 0, 0), (1, 1, 2)), materials=(mat,),
+              layers=(pk.LayerSpec(1.0),), radius=pk.RadiusDistribution(0.05, 0.2))
+    s1, s2 = pk.PackingSpec(**kw), pk.PackingSpec(**kw)
+    assert s1.hash() == s2.hash()
+    assert pk.PackingSpec(**kw, seed=1).hash() != s1.hash()
+    kw2 = dict(kw, materials=(dataclasses.replace(mat, young=2.1e7),))
+    assert pk.PackingSpec(**kw2).hash() != s1.hash()
+    with pytest.raises(ValueError, match=r"layers\[0\].material=1"):
+        pk.PackingSpec(**dict(kw, layers=(pk.LayerSpec(1.0, material=1),)))
+    with pytest.raises(ValueError, match="exceeds the container height"):
+        pk.PackingSpec(**dict(kw, layers=(pk.LayerSpec(3.0),)))
+
+
+# --------------------------------------------------------------------------------------------
+# deposition, layers, slope (use the DEM engine; kept small: a few hundred grains)
+# --------------------------------------------------------------------------------------------
+
+#: Grains of the tests: the thesis's r = 0.05 m +/- 20 %, E = 2e7 Pa, rho = 2650 kg/m^3.
+DIST = pk.RadiusDistribution(0.05, 0.2)
+#: dt = 2.3e-4 s is the thesis's step, half Yade's P-wave step r_min sqrt(rho/E) = 4.6e-4 s.
+DT = 2.3e-4
+#: Static equilibrium: after the unbalanced-force ratio fell below 0.01 and 100 undamped steps,
+#: the mean support force equals the weight to within the residual out-of-balance force, which
+#: is of order threshold x (mean contact force x contacts / particles) ~ 1-2 % of W here.
+EQUILIBRIUM_REL = 0.03
+#: Random packings of spheres: random close packing (frictionless limit) porosity 0.36
+#: (Scott & Kilgour 1969), random loose packing 0.45 (infinite friction, free rotation;
+#: Onoda & Liniger 1990).  Polydispersity of +/-20 % densifies by < 0.01 (Desmond & Weeks 2014).
+RCP_POROSITY, RLP_POROSITY = 0.355, 0.45
+
+
+def _soil(phi=math.radians(30.0), young=2e7, name="soil"):
+    return Material(young=young, density=2650.0, friction_angle=phi, stiffness_ratio=0.25,
+                    name=name)
+
+
+def test_small_deposition_equilibrium_porosity_determinism():
+    """Oracles: static equilibrium (floor force = bed weight with frictionless walls, so the
+    walls carry no vertical load), the random-packing porosity bounds for low friction, and
+    bit-identical results for the same seed and inputs."""
+    box = pk.BoxRegion((0.0, 0.0, 0.0), (0.6, 0.6, 3.0))
+    mat = _soil(phi=math.atan(0.1))
+    n = 400
+    x, r = pk.rsa_cloud(box, DIST, n, seed=11)
+    settings = pk.DepositionSettings(dt=DT, wall_friction_angle=0.0, check_every=100)
+    res = pk.deposit(x, r, np.zeros(n, np.int32), [mat], box, settings)
+    assert res.converged and res.unbalanced < settings.threshold
+    assert res.floor_force == pytest.approx(res.weight, rel=EQUILIBRIUM_REL)
+    assert abs(res.wall_force) < EQUILIBRIUM_REL * res.weight
+    top = float(np.quantile(res.x[:, 2], 0.9))
+    m = 2 * DIST.r_max
+    ctrl = pk.BoxRegion((m, m, m), (0.6 - m, 0.6 - m, top - m))
+    n_por = pk.porosity(res.x, res.radius, ctrl)
+    assert RCP_POROSITY <= n_por <= RLP_POROSITY, n_por
+    # determinism: the same cloud through the same number of steps is bit-identical
+    short = dataclasses.replace(settings, max_steps=300, on_max_steps="warn", settle_steps=0)
+    with pytest.warns(RuntimeWarning, match="max_steps=300"):
+        a = pk.deposit(x, r, np.zeros(n, np.int32), [mat], box, short)
+    with pytest.warns(RuntimeWarning, match="max_steps=300"):
+        b = pk.deposit(x, r, np.zeros(n, np.int32), [mat], box, short)
+    assert np.array_equal(a.x, b.x)
+
+
+def test_max_steps_guard_raises_clearly():
+    """The max-steps guard raises a DepositionError naming the threshold and the limit."""
+    box = pk.BoxRegion((0.0, 0.0, 0.0), (0.4, 0.4, 2.0))
+    x, r = pk.rsa_cloud(box, DIST, 40, seed=1)
+    settings = pk.DepositionSettings(dt=DT, max_steps=50, check_every=50)
+    with pytest.raises(pk.DepositionError, match="max_steps=50"):
+        pk.deposit(x, r, np.zeros(40, np.int32), [_soil()], box, settings)
+
+
+def test_layered_packing_ids_porosity_and_sharp_interface():
+    """Oracle: construction requirements.  A lower layer deposited at low friction (dense) and
+    an upper one at the soil friction with blocked rotations (loose) carry their material ids,
+    their porosities differ by more than the sampling noise, and the solid volume switches
+    from the lower to the upper material within one diameter of the requested depth."""
+    depth_interface = 0.35
+    spec = pk.PackingSpec(
+        container=pk.BoxRegion((0.0, 0.0, 0.0), (0.6, 0.6, 1.2)),
+        materials=(_soil(young=5e7, name="compacted"), _soil(name="reworked")),
+        layers=(pk.LayerSpec(depth_interface, material=0, deposition_friction=math.atan(0.1)),
+                pk.LayerSpec(0.35, material=1)),
+        radius=DIST, seed=5, deposition=pk.DepositionSettings(dt=DT, check_every=100),
+    )
+    p = pk.build(spec)
+    assert set(np.unique(p.material)) == {0, 1}
+    lower, upper = p.info["layers"][0]["porosity"], p.info["layers"][1]["porosity"]
+    # noise of a porosity over ~50 grain volumes is ~0.02; demand a clear gap of 0.04
+    assert upper - lower > 0.04, (lower, upper)
+    d = 2 * DIST.mean
+    z = p.x[:, 2]
+    assert z[p.material == 0].max() <= depth_interface + 1e-12
+    vols = pk.sphere_volumes_in_region(
+        p.x, p.radius, pk.BoxRegion((0.0, 0.0, 0.0), (0.6, 0.6, depth_interface - d)))
+    # below z - d only grains nested in the pockets of the carved surface: < 5 % of the solid
+    assert vols[p.material == 1].sum() < 0.05 * vols.sum()
+    above = pk.BoxRegion((0.0, 0.0, depth_interface + d), (0.6, 0.6, 1.0))
+    vols = pk.sphere_volumes_in_region(p.x, p.radius, above)
+    assert vols[p.material == 0].sum() == 0.0  # nothing of the lower layer above z + d
+    # surface within one diameter of the requested height
+    assert abs(float(np.quantile(z + p.radius, 0.98)) - spec.surface_height) < d
+
+
+@pytest.mark.parametrize("compaction", ["horizontal", "normal"])
+def test_slope_surface_on_45_degree_plane(compaction):
+    """Oracle: geometry of the carved slope.  Every grain centre lies below the 45 deg plane,
+    and every point of the plane (away from the container edges) has a grain centre within one
+    diameter below it (no hole deeper than a grain), so the free surface is the plane to
+    within a particle diameter."""
+    L = 0.7
+    spec = pk.PackingSpec(
+        container=pk.BoxRegion((0.0, 0.0, 0.0), (L, 0.4, L)),
+        materials=(_soil(),),
+        layers=(pk.LayerSpec(L),),
+        radius=DIST, seed=9, slope=pk.SlopeSpec(math.pi / 4, compaction),
+        deposition=pk.DepositionSettings(dt=DT, check_every=100),
+    )
+    p = pk.build(spec)
+    n_out = spec.slope.normal()
+    dist = p.x @ n_out  # signed distance from the plane through the origin (x_lo, z_lo)
+    assert dist.max() <= 0.0
+    d = 2 * DIST.mean
+    e1 = np.array([math.cos(math.pi / 4), 0.0, math.sin(math.pi / 4)])  # up-slope direction
+    e2 = np.array([0.0, 1.0, 0.0])
+    s = np.linspace(d, L * math.sqrt(2) - d, 8)
+    t = np.linspace(d, 0.4 - d, 4)
+    worst = 0.0
+    for si in s:
+        for tj in t:
+            q = si * e1 + tj * e2
+            rel = p.x - q
+            depth = -(rel @ n_out)
+            lateral = np.linalg.norm(rel - np.outer(rel @ n_out, n_out), axis=1)
+            near = lateral <= d
+            worst = max(worst, float(depth[near].min()) if near.any() else np.inf)
+    assert worst <= d, worst
