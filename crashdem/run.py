@@ -107,6 +107,7 @@ def packing_spec(scen: Scenario):
         materials.append(soil_material(scen, lower=True))
         layers = (
             pk.LayerSpec(depth - z_d, material=1,
+                         deposition_friction=_deg(scen["physics.soil_layering.lower_deposition_friction_deg"]),
                          target_porosity=scen["physics.soil_layering.lower_porosity"]),
             pk.LayerSpec(z_d, material=0, deposition_friction=dep_phi, target_porosity=upper_por),
         )
