@@ -730,6 +730,13 @@ class Simulation:
             "moment": np.concatenate([mom, np.zeros((nb, 3))]),
         }
 
+    def n_contacts(self) -> int:
+        """Number of active contacts (particle pairs in contact + boundary contacts), without
+        building the post-processing arrays of :meth:`contacts`."""
+        hf = self._hf
+        touching = (hf[:, K.H_N] != 0.0) | (hf[:, K.H_N + 1] != 0.0) | (hf[:, K.H_N + 2] != 0.0)
+        return int(np.count_nonzero(touching)) + int(self._c_p.shape[0])
+
     def memory_bytes(self) -> dict:
         """Memory held by the engine's arrays [bytes] (per-particle and per-pair parts)."""
         p = self.particles

@@ -194,6 +194,7 @@ def crashdem_worker(cfg: dict) -> dict:
         "peak_rss_mb": _rss_mb("VmHWM"),
         "rss_after_warmup_mb": rss0,
         "bytes_per_particle": (_rss_mb("VmHWM") - rss0) * 1024.0 * 1024.0 / len(r),
+        "engine_bytes_per_particle": sim.memory_bytes()["per_particle"],
         "drop_mass": m,
     }
     np.save(cfg["out"] + ".npy", hist)
@@ -208,10 +209,7 @@ def crashdem_worker(cfg: dict) -> dict:
 
 
 def _sim_contacts_len(sim) -> int:
-    c = sim.contacts()
-    if isinstance(c, dict):
-        return len(next(iter(c.values())))
-    return len(c[0])
+    return sim.n_contacts()
 
 
 def metrics(hist: np.ndarray, surface: float, mass: float) -> dict:
@@ -300,6 +298,7 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
         rec["crashdem_particle_steps_per_s"] = c["particle_steps_per_s"]
         rec["peak_rss_mb"] = c["peak_rss_mb"]
         rec["crashdem_bytes_per_particle"] = c["bytes_per_particle"]
+        rec["crashdem_engine_bytes_per_particle"] = c["engine_bytes_per_particle"]
         if "yade" in rec:
             y = rec["yade"]
             rec["yade_particle_steps_per_s"] = y["particle_steps_per_s"]
@@ -375,6 +374,7 @@ def main(argv=None) -> int:
             "max_penetration_rel_diff")
     summary = {k: key[k] for k in keys}
     summary["crashdem_bytes_per_particle"] = key["crashdem_bytes_per_particle"]
+    summary["crashdem_engine_bytes_per_particle"] = key["crashdem_engine_bytes_per_particle"]
     summary["runs"] = [
         {k: r[k] for k in keys + ("crashdem_bytes_per_particle",)}
         | {f"crashdem_{m}": r["crashdem"][m] for m in ("peak_decel_g", "max_penetration_m",
