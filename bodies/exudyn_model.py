@@ -131,6 +131,9 @@ class ExudynRigidBody:
             nodeType=exu.NodeType.RotationRotationVector, show=False, returnDict=True)
         self._node = d["nodeNumber"]
         self._body = d["bodyNumber"]
+        # reference configuration of the node (exact restart rebuilds the same one)
+        self._ref_position = pos.copy()
+        self._ref_rotation = rot.copy()
         marker = mbs.AddMarker(eii.MarkerNodeRigid(nodeNumber=self._node))
         self._load_force = mbs.AddLoad(eii.LoadForceVector(markerNumber=marker,
                                                            loadVector=[0.0, 0.0, 0.0],
@@ -295,22 +298,59 @@ class ExudynRigidBody:
         return self.spec.mass * self.velocity(), self.inertia_world() @ self.angular_velocity()
 
     def state_dict(self) -> dict:
-        """Restart state: pose, velocities, clock and the held load (world frame, SI)."""
+        """Restart state: pose, velocities, clock and the held load (world frame, SI), plus
+        the exact Exudyn state (reference configuration, ODE2 coordinates and velocities,
+        solver clock) used by :meth:`load_state_dict` for a bit-exact restart."""
+        sd = self._mbs.systemData
         return {"position": self.position(), "rotation": self.rotation(),
                 "velocity": self.velocity(), "angular_velocity": self.angular_velocity(),
-                "time": self._time, "force": self._force.copy(), "torque": self._torque.copy()}
+                "time": self._time, "force": self._force.copy(), "torque": self._torque.copy(),
+                "reference_position": self._ref_position.copy(),
+                "reference_rotation": self._ref_rotation.copy(),
+                "ode2": np.array(sd.GetODE2Coordinates(), dtype=np.float64),
+                "ode2_t": np.array(sd.GetODE2Coordinates_t(), dtype=np.float64),
+                "exu_time": self._exu_time, "n_advances": self.n_advances}
 
     def load_state_dict(self, d: dict) -> None:
         """Rebuild the Exudyn system at a saved state (see :meth:`state_dict`).
 
         Notes
         -----
-        Exudyn stores the pose as reference + displacement coordinates; a rebuilt body starts
-        from a new reference, so a restarted run agrees with an uninterrupted one to round-off,
-        not bit for bit.
+        Exudyn stores the pose as reference + displacement coordinates. When the dict holds
+        the reference configuration and the ODE2 coordinates (``state_dict`` of this
+        version), the body is rebuilt on the same reference, its coordinates and velocities
+        are set exactly (``SystemData.SetODE2Coordinates`` / ``_t``, initial configuration)
+        and the solver is initialised at the saved Exudyn clock, so a
+        restarted run is bit-identical to an uninterrupted one. An older dict without them
+        rebuilds the body on a new reference: identical to round-off only.
         """
-        self.reset(d["position"], d["rotation"], d["velocity"], d["angular_velocity"],
-                   float(d["time"]))
+        if "ode2" not in d:
+            self.reset(d["position"], d["rotation"], d["velocity"], d["angular_velocity"],
+                       float(d["time"]))
+            self.apply(d["force"], d["torque"])
+            return
+        self.reset(d["reference_position"], d["reference_rotation"], (0.0, 0.0, 0.0),
+                   (0.0, 0.0, 0.0), float(d["time"]))
+        sd = self._mbs.systemData
+        q = np.asarray(d["ode2"], dtype=np.float64)
+        q_t = np.asarray(d["ode2_t"], dtype=np.float64)
+        n = len(sd.GetODE2Coordinates())
+        if q.shape != (n,) or q_t.shape != (n,):
+            raise ValueError(f"ExudynRigidBody.load_state_dict: ode2 shape {q.shape} / ode2_t "
+                             f"shape {q_t.shape}: must be ({n},)")
+        # the explicit solver takes its state and clock from the initial configuration and
+        # ``timeIntegration.startTime`` when it is initialised (setting the current
+        # configuration of an initialised solver is not seen by its first step): set both,
+        # then initialise a fresh solver
+        self._solver.FinalizeSolver(self._mbs, self._ss)
+        self._solver = None
+        sd.SetODE2Coordinates(q.tolist(), configuration=exu.ConfigurationType.Initial)
+        sd.SetODE2Coordinates_t(q_t.tolist(), configuration=exu.ConfigurationType.Initial)
+        self._exu_time = float(d["exu_time"])
+        self._ss.timeIntegration.startTime = self._exu_time
+        self._solver = exu.MainSolverExplicit()
+        self._solver.InitializeSolver(self._mbs, self._ss)
+        self.n_advances = int(d.get("n_advances", 0))
         self.apply(d["force"], d["torque"])
 
     def __del__(self):

@@ -392,9 +392,10 @@ class CoSimulation:
 
         Notes
         -----
-        The DEM restart is bit-exact; the Exudyn body is rebuilt at the saved staggered
-        state, which agrees with an uninterrupted run to round-off (see
-        ``ExudynRigidBody.load_state_dict``).
+        The DEM restart is bit-exact; the Exudyn body is rebuilt on its saved reference
+        configuration with its exact ODE2 coordinates, velocities and solver clock (see
+        ``ExudynRigidBody.load_state_dict``), so the resumed coupling is bit-identical to an
+        uninterrupted one (same thread count).
         """
         if float(sim.dt) != float(d["h"]):
             raise ValueError(f"CoSimulation.from_state_dict: sim.dt={sim.dt!r} differs from the "

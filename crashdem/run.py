@@ -331,38 +331,113 @@ def default_output(scen: Scenario, out_dir: str | os.PathLike | None) -> Path:
     return d / f"{scen['scenario.name']}.h5"
 
 
+#: the coupling refreshes its energy ledger every this many exchanges (``CoSimulation.run``)
+LEDGER_EVERY = 10
+
+
 def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
                  resume: bool = False, plots: bool | None = None) -> Path:
-    """Run a scenario end to end and return the HDF5 result path."""
+    """Run a scenario end to end and return the HDF5 result path.
+
+    Parameters
+    ----------
+    scen : Scenario
+    out_dir : output directory (default: ``output.directory``)
+    progress : show the progress line
+    resume : continue a killed run from its last checkpoint (``<name>.ckpt.h5`` next to the
+        result); the results are bit-identical to an uninterrupted run (same thread count)
+    plots : write PNG plots (default: ``output.plots``)
+
+    Notes
+    -----
+    With ``output.checkpoint_every_s`` set, a checkpoint (``crashdem.checkpoint``) is written
+    at the first exchange at or after every multiple of that simulated-time interval that
+    follows an energy-ledger refresh (so that the resumed ledger cadence is the same), and a
+    final one (``complete=True``) at the end; see ``docs/restart.md``.
+    """
+    from crashdem import checkpoint as ck
     from crashdem.progress import Progress
     from crashdem.results import ResultWriter
 
-    if resume:
-        raise ScenarioError("--resume: restart from checkpoints is not available in this version")
     path = default_output(scen, out_dir)
     path.parent.mkdir(parents=True, exist_ok=True)
+    ckpt_path = ck.checkpoint_path(path)
+    every = scen["output.checkpoint_every_s"]
+    if (resume or every is not None) and scen["scenario.kind"] == "glider_crash":
+        raise ScenarioError(
+            f"output.checkpoint_every_s={every!r} / --resume: restart from checkpoints is "
+            "available for the drop test only (scenario.kind='drop_test'); the glider crash "
+            "keeps wall and contact state outside the DEM")
+    saved = None
+    if resume:
+        saved = ck.read_checkpoint(ckpt_path)
+        saved.check_scenario(scen, ckpt_path)
+        if saved.complete and path.exists():
+            from crashdem.results import open_result
+
+            with open_result(path) as res:
+                if res.complete:
+                    raise ScenarioError(f"--resume: {path} is already complete (its checkpoint "
+                                        f"{ckpt_path} holds the final state); nothing to resume")
     cache = path.parent / "packings"
     wall0 = time.perf_counter()
     log.info("building %s (packing cache: %s)", scen["scenario.name"], cache)
     m = build_model(scen, cache)
+    if saved is not None:
+        saved.restore(m)
+        log.info("resuming %s from its checkpoint at t = %.6g s (%s)", scen["scenario.name"],
+                 saved.t, ckpt_path)
     log.info("%d particles, dt = %.3g s (critical %.3g s), impact at %.2f m/s",
              m.sim.particles.n, m.sim.dt, m.sim.dt_critical, scen.impact_velocity)
     n_snap = scen["output.snapshots"]
     snap_times = list(np.linspace(0.0, m.t_end, n_snap)) if n_snap > 0 else []
-    bar = Progress(m.t_end, label=scen["scenario.name"], enabled=progress)
-    with ResultWriter(path, scenario=scen, seed=scen["scenario.seed"],
-                      threads=scen["scenario.threads"] or None,
-                      title=scen["scenario.description"],
-                      default_cfc=scen["instrumentation.cfc"]) as w:
-        w.declare_sensors(m.sensors)
+    if saved is None:
+        state = {"steps": 0, "snap": 0, "next_checkpoint": every if every is not None else 0.0}
+        bar = Progress(m.t_end, label=scen["scenario.name"], enabled=progress)
+        w = ResultWriter(path, scenario=scen, seed=scen["scenario.seed"],
+                         threads=scen["scenario.threads"] or None,
+                         title=scen["scenario.description"],
+                         default_cfc=scen["instrumentation.cfc"])
+    else:
+        state = {k: saved.loop[k] for k in ("steps", "snap", "next_checkpoint")}
+        if (state["steps"] - 1) % LEDGER_EVERY:
+            raise ck.CheckpointError(
+                f"{ckpt_path}: loop steps={state['steps']}: a checkpoint is taken right after "
+                f"a ledger refresh (steps = 1 mod {LEDGER_EVERY})")
+        bar = Progress(m.t_end, label=scen["scenario.name"], enabled=progress, t0=saved.t)
+        poses = ck.read_body_poses(path, saved.t) if path.exists() else {}
+        w = ResultWriter.resume(path, saved.t, sensor_set=m.sensors,
+                                default_cfc=scen["instrumentation.cfc"])
+    with w:
+        if saved is None:
+            w.declare_sensors(m.sensors)
         if snap_times:
             from crashdem.export import declare_body_surface, write_body_pose
 
-            w.declare_snapshots(m.sim.particles.radius)
+            if saved is None:
+                w.declare_snapshots(m.sim.particles.radius)
+            elif "snapshots" not in w._f:
+                raise ck.CheckpointError(f"{path}: the interrupted result has no snapshots "
+                                         "group; cannot resume it")
             declare_body_surface(w, m.body_name, m.spec.vertices, m.spec.triangles)
-        m.cosim.update_ledger()
-        w.declare_energy(list(_ledger_dict(m.cosim.ledger)))
-        state = {"steps": 0, "snap": 0}
+            if saved is not None and m.body_name in poses:
+                for pos, rot in zip(poses[m.body_name]["position"],
+                                    poses[m.body_name]["rotation"]):
+                    write_body_pose(w, m.body_name, pos, rot)
+        if saved is None:
+            m.cosim.update_ledger()
+            w.declare_energy(list(_ledger_dict(m.cosim.ledger)))
+        scen_hash = ck.scenario_hash(scen)
+        steps0 = state["steps"]  # the progress bar's rate counts this session's steps only
+
+        def checkpoint(t, complete=False):
+            # everything drained so far is on disk before the checkpoint names it as kept
+            w.append_sensors(m.sensors)
+            w.flush()
+            ck.write_checkpoint(ckpt_path, ck.Checkpoint(
+                t=float(t), soil=m.sim.state_dict(), cosim=m.cosim.state_dict(),
+                sensors=m.sensors, loop=dict(state), scenario_hash=scen_hash,
+                complete=complete))
 
         def record(t, sim, model):
             if m.pre_record is not None:
@@ -381,20 +456,31 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
                 b = sim.boundaries[m.body_index]
                 write_body_pose(w, m.body_name, b.position, b.rotation)
                 state["snap"] += 1
-            bar.update(t, state["steps"])
+            # CoSimulation.run refreshes the ledger at exchanges k = LEDGER_EVERY j counted
+            # from its start (here steps = k + 1); a resumed run restarts k at 0, so the
+            # checkpoint is taken right after a refresh to keep the same cadence
+            if (every is not None and t >= state["next_checkpoint"]
+                    and (state["steps"] - 1) % LEDGER_EVERY == 0):
+                state["next_checkpoint"] = (math.floor(t / every) + 1) * every
+                checkpoint(t)
+            bar.update(t, state["steps"] - steps0)
 
-        record(m.sim.time, m.sim, m.model)
-        m.cosim.run(m.t_end, on_step=record, ledger_every=10)
+        if saved is None:
+            record(m.sim.time, m.sim, m.model)
+        m.cosim.run(m.t_end, on_step=record, ledger_every=LEDGER_EVERY)
         w.append_sensors(m.sensors)
         w.append_energy(m.sim.time, _ledger_dict(m.cosim.ledger))
+        if every is not None:
+            checkpoint(m.sim.time, complete=True)
         bar.close(m.sim.time)
-    _write_run_info(path, {"particles": int(m.sim.particles.n), "dt": float(m.sim.dt),
-                           "dt_critical": float(m.sim.dt_critical),
-                           "surface_z": float(m.surface_z),
-                           "impact_velocity": float(scen.impact_velocity),
-                           "t_contact": float(m.t_contact), "stop_reason": str(m.cosim.stop_reason),
-                           "dem_steps": int(m.sim.step_count),
-                           "wall_s": time.perf_counter() - wall0})
+    info = {"particles": int(m.sim.particles.n), "dt": float(m.sim.dt),
+            "dt_critical": float(m.sim.dt_critical), "surface_z": float(m.surface_z),
+            "impact_velocity": float(scen.impact_velocity), "t_contact": float(m.t_contact),
+            "stop_reason": str(m.cosim.stop_reason), "dem_steps": int(m.sim.step_count),
+            "wall_s": time.perf_counter() - wall0}
+    if saved is not None:
+        info["resumed_from_t"] = float(saved.t)
+    _write_run_info(path, info)
     if plots if plots is not None else scen["output.plots"]:
         from crashdem.plotting import plot_result
 

@@ -1,0 +1,352 @@
+"""Restart checkpoints of a coupled run: one HDF5 file next to the result, written atomically.
+
+API
+---
+``checkpoint_path(result_path) -> Path``            ``<name>.ckpt.h5`` next to ``<name>.h5``
+``scenario_hash(scenario) -> str``                  SHA-256 of what decides the results
+``write_checkpoint(path, checkpoint) -> Path``      atomic: temp file, fsync, rename
+``read_checkpoint(path) -> Checkpoint``
+``Checkpoint.check_scenario(scenario)``             refuse another scenario (both hashes named)
+``Checkpoint.restore(model)``                       put the saved state into a freshly built
+                                                    ``crashdem.run.Model`` (drop test)
+
+A checkpoint holds the DEM state (``soil.Simulation.state_dict()``: arrays as datasets, the
+boundary objects pickled), the coupling and Exudyn state (``CoSimulation.state_dict()``, with
+the Exudyn reference configuration and ODE2 coordinates for a bit-exact restart), the pickled
+``crashdem.sensors.SensorSet`` (an opaque ``uint8`` dataset), the run loop's counters, the
+scenario hash and the crashdem version. The layout is documented in ``docs/restart.md``.
+
+Notes
+-----
+Atomic replacement: POSIX ``rename(2)`` replaces the target in one step; the data are made
+durable first with ``fsync(2)`` on the temporary file and then on the directory, so a reader
+(or a resumed run) sees either the previous complete checkpoint or the new complete one.
+"""
+from __future__ import annotations
+
+import copy
+import hashlib
+import json
+import math
+import os
+import pickle
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+#: ``attrs["format"]`` of a checkpoint file
+FORMAT_NAME = "crashdem-checkpoint"
+#: layout version; a reader refuses other versions
+FORMAT_VERSION = 1
+#: scenario fields that cannot change the results (where files go, plots, checkpoint cadence);
+#: they are left out of the scenario hash so that a run can be resumed with other values
+HASH_EXCLUDED = (("output", "directory"), ("output", "plots"), ("output", "checkpoint_every_s"))
+#: pickle protocol of opaque objects (Python >= 3.8)
+PICKLE_PROTOCOL = 5
+
+
+class CheckpointError(ValueError):
+    """A checkpoint is missing, unreadable, or belongs to another scenario or version."""
+
+
+def checkpoint_path(result_path: str | os.PathLike) -> Path:
+    """The checkpoint file of a result: ``<dir>/<name>.ckpt.h5`` for ``<dir>/<name>.h5``."""
+    p = Path(result_path)
+    return p.with_name(p.stem + ".ckpt.h5")
+
+
+def scenario_hash(scenario: Any) -> str:
+    """SHA-256 (hex) of the scenario data that decide the results.
+
+    Parameters
+    ----------
+    scenario : crashdem.scenario.Scenario (or a nested dict of its data)
+
+    Notes
+    -----
+    Canonical JSON of ``scenario.data`` (sorted keys) without the fields in
+    :data:`HASH_EXCLUDED`; SHA-256 (FIPS 180-4).
+    """
+    data = copy.deepcopy(getattr(scenario, "data", scenario))
+    for sect, key in HASH_EXCLUDED:
+        if isinstance(data.get(sect), dict):
+            data[sect].pop(key, None)
+    text = json.dumps(data, sort_keys=True, default=repr, allow_nan=True)
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _crashdem_version() -> str:
+    import crashdem
+
+    return str(crashdem.__version__)
+
+
+# --------------------------------------------------------------------------------------------
+# nested state <-> HDF5 (arrays and scalars bit-exact; other objects pickled)
+# --------------------------------------------------------------------------------------------
+_SCALARS = {bool: "bool", int: "int", float: "float", str: "str"}
+
+
+def _put(g: h5py.Group, name: str, obj: Any) -> None:
+    """Store ``obj`` as member ``name`` of ``g`` (recursive)."""
+    # exact types only: subclasses (OrderedDict, np.matrix, ...) go through pickle, so that
+    # every entry comes back with its own type
+    if type(obj) is dict and all(isinstance(k, str) for k in obj):
+        sub = g.create_group(name)
+        sub.attrs["kind"] = "dict"
+        keys = list(obj)
+        sub.attrs["keys"] = json.dumps(keys)
+        for i, k in enumerate(keys):
+            _put(sub, str(i), obj[k])
+    elif type(obj) in (list, tuple):
+        sub = g.create_group(name)
+        sub.attrs["kind"] = type(obj).__name__
+        sub.attrs["n"] = len(obj)
+        for i, v in enumerate(obj):
+            _put(sub, str(i), v)
+    elif type(obj) is np.ndarray and obj.dtype.kind in "biufc" and not obj.dtype.fields:
+        d = g.create_dataset(name, data=obj)
+        d.attrs["kind"] = "ndarray"
+        d.attrs["fortran"] = bool(obj.flags.f_contiguous and not obj.flags.c_contiguous)
+    elif isinstance(obj, np.generic) and np.asarray(obj).dtype.kind in "biufc":
+        d = g.create_dataset(name, data=np.asarray(obj))
+        d.attrs["kind"] = "npscalar"
+    elif obj is None:
+        d = g.create_dataset(name, data=np.zeros(0, dtype=np.uint8))
+        d.attrs["kind"] = "none"
+    elif type(obj) in _SCALARS and not (type(obj) is int and not -2**63 <= obj < 2**63):
+        kind = _SCALARS[type(obj)]
+        if kind == "str":
+            d = g.create_dataset(name, data=obj, dtype=h5py.string_dtype())
+        else:
+            d = g.create_dataset(name, data={"bool": np.bool_, "int": np.int64,
+                                             "float": np.float64}[kind](obj))
+        d.attrs["kind"] = kind
+    else:
+        blob = pickle.dumps(obj, protocol=PICKLE_PROTOCOL)
+        d = g.create_dataset(name, data=np.frombuffer(blob, dtype=np.uint8))
+        d.attrs["kind"] = "pickle"
+        d.attrs["type"] = f"{type(obj).__module__}.{type(obj).__qualname__}"
+
+
+def _get(node: h5py.Group | h5py.Dataset) -> Any:
+    """Inverse of :func:`_put`."""
+    kind = node.attrs["kind"]
+    if isinstance(kind, bytes):
+        kind = kind.decode()
+    if kind == "dict":
+        keys = json.loads(node.attrs["keys"])
+        return {k: _get(node[str(i)]) for i, k in enumerate(keys)}
+    if kind in ("list", "tuple"):
+        items = [_get(node[str(i)]) for i in range(int(node.attrs["n"]))]
+        return items if kind == "list" else tuple(items)
+    if kind == "ndarray":
+        # np.array keeps 0-d arrays 0-d (np.ascontiguousarray would make them 1-d)
+        return np.array(node[()], order="F" if node.attrs["fortran"] else "C")
+    if kind == "npscalar":
+        return node[()].dtype.type(node[()])
+    if kind == "none":
+        return None
+    if kind == "bool":
+        return bool(node[()])
+    if kind == "int":
+        return int(node[()])
+    if kind == "float":
+        return float(node[()])
+    if kind == "str":
+        v = node[()]
+        return v.decode() if isinstance(v, bytes) else str(v)
+    if kind == "pickle":
+        return pickle.loads(node[()].tobytes())
+    raise CheckpointError(f"checkpoint: unknown entry kind {kind!r} at {node.name}")
+
+
+# --------------------------------------------------------------------------------------------
+# the checkpoint
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Checkpoint:
+    """State of a coupled run at DEM time ``t``.
+
+    Attributes
+    ----------
+    t : float
+        DEM time of the checkpoint [s].
+    soil : dict
+        ``soil.Simulation.state_dict()``.
+    cosim : dict
+        ``coupling.CoSimulation.state_dict()`` (Exudyn state included).
+    sensors : crashdem.sensors.SensorSet
+        The sensor set with its filter states and undrained samples.
+    loop : dict
+        Run-loop counters: ``steps`` (sensor records so far, the first one at t = 0),
+        ``snap`` (snapshots written), ``next_checkpoint`` (time of the next one) [s]. The
+        resumed progress bar starts at ``t`` and counts the steps after ``steps``.
+    scenario_hash : str
+        :func:`scenario_hash` of the run's scenario.
+    crashdem_version : str
+    complete : bool
+        True for the checkpoint written at the end of a finished run (the final state).
+    """
+
+    t: float
+    soil: dict
+    cosim: dict
+    sensors: Any
+    loop: dict = field(default_factory=dict)
+    scenario_hash: str = ""
+    crashdem_version: str = ""
+    complete: bool = False
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.t):
+            raise ValueError(f"Checkpoint.t={self.t!r}: must be finite [s]")
+        for k in ("steps", "snap"):
+            v = self.loop.get(k, 0)
+            if not (isinstance(v, (int, np.integer)) and v >= 0):
+                raise ValueError(f"Checkpoint.loop[{k!r}]={v!r}: must be an int >= 0")
+
+    def check_scenario(self, scenario: Any, path: str | os.PathLike = "") -> None:
+        """Raise :class:`CheckpointError` unless ``scenario`` is the checkpointed one.
+
+        The message names both hashes and the checkpoint file.
+        """
+        h = scenario_hash(scenario)
+        if h != self.scenario_hash:
+            raise CheckpointError(
+                f"checkpoint {path or '(in memory)'} belongs to another scenario: checkpoint "
+                f"scenario hash {self.scenario_hash}, this scenario's hash {h}; resume with the "
+                "same scenario file and overrides (only output.directory, output.plots and "
+                "output.checkpoint_every_s may differ), or run without --resume")
+        here = _crashdem_version()
+        if self.crashdem_version != here:
+            raise CheckpointError(
+                f"checkpoint {path or '(in memory)'} was written by crashdem "
+                f"{self.crashdem_version}, this is crashdem {here}: a bit-identical restart "
+                "needs the same version; run without --resume")
+
+    def restore(self, model: Any) -> Any:
+        """Put the saved state into a freshly built drop-test ``crashdem.run.Model``.
+
+        The DEM is rebuilt by ``soil.Simulation.from_state_dict`` and the coupling by
+        ``coupling.CoSimulation.from_state_dict`` on the model's Exudyn body; the sensor set
+        is replaced by the saved one. Returns the model (modified in place).
+        """
+        import coupling
+        import soil
+
+        if model.pre_record is not None or model.extra:
+            raise CheckpointError(
+                "checkpoint restore: this model carries state outside the DEM, the coupling "
+                "and the sensors (pre_record/extra, e.g. the glider's compliant walls); "
+                "restart is available for the drop test only")
+        sim = soil.Simulation.from_state_dict(self.soil)
+        cosim = coupling.CoSimulation.from_state_dict(sim, model.body_index, model.model,
+                                                      self.cosim)
+        model.sim = sim
+        model.cosim = cosim
+        model.sensors = self.sensors
+        return model
+
+
+def write_checkpoint(path: str | os.PathLike, ckpt: Checkpoint) -> Path:
+    """Write ``ckpt`` to ``path`` atomically (temp file in the same directory, fsync, rename);
+    the previous checkpoint is replaced, so only the last one is kept.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    path = Path(path)
+    tmp = path.with_name(path.name + ".tmp")
+    try:
+        with h5py.File(tmp, "w", libver="latest") as f:
+            f.attrs["format"] = FORMAT_NAME
+            f.attrs["format_version"] = FORMAT_VERSION
+            f.attrs["crashdem_version"] = ckpt.crashdem_version or _crashdem_version()
+            f.attrs["scenario_hash"] = ckpt.scenario_hash
+            f.attrs["t"] = float(ckpt.t)
+            f.attrs["t.unit"] = "s"
+            f.attrs["complete"] = bool(ckpt.complete)
+            _put(f, "soil", ckpt.soil)
+            _put(f, "cosim", ckpt.cosim)
+            _put(f, "loop", dict(ckpt.loop))
+            blob = pickle.dumps(ckpt.sensors, protocol=PICKLE_PROTOCOL)
+            d = f.create_dataset("sensors", data=np.frombuffer(blob, dtype=np.uint8))
+            d.attrs["kind"] = "pickle"
+            d.attrs["type"] = f"{type(ckpt.sensors).__module__}.{type(ckpt.sensors).__qualname__}"
+        fd = os.open(tmp, os.O_RDONLY)
+        try:
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+        dfd = os.open(path.parent, os.O_RDONLY)
+        try:
+            os.fsync(dfd)
+        finally:
+            os.close(dfd)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path
+
+
+def read_checkpoint(path: str | os.PathLike) -> Checkpoint:
+    """Read a checkpoint written by :func:`write_checkpoint`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no checkpoint at ``path``.
+    CheckpointError
+        If the file is not a crashdem checkpoint of this format version.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(
+            f"{path}: no checkpoint to resume from (set output.checkpoint_every_s and run "
+            "without --resume)")
+    with h5py.File(path, "r") as f:
+        fmt = f.attrs.get("format", "")
+        fmt = fmt.decode() if isinstance(fmt, bytes) else str(fmt)
+        if fmt != FORMAT_NAME:
+            raise CheckpointError(f"{path}: attrs['format']={fmt!r}: not a {FORMAT_NAME} file")
+        ver = int(f.attrs["format_version"])
+        if ver != FORMAT_VERSION:
+            raise CheckpointError(f"{path}: format_version={ver}: this reader needs "
+                                  f"{FORMAT_VERSION}")
+        return Checkpoint(t=float(f.attrs["t"]), soil=_get(f["soil"]), cosim=_get(f["cosim"]),
+                          sensors=_get(f["sensors"]), loop=_get(f["loop"]),
+                          scenario_hash=str(f.attrs["scenario_hash"]),
+                          crashdem_version=str(f.attrs["crashdem_version"]),
+                          complete=bool(f.attrs["complete"]))
+
+
+def read_body_poses(result_path: str | os.PathLike, t_cut: float) -> dict[str, dict]:
+    """Body surfaces and snapshot poses stored in a (possibly killed) result, up to ``t_cut``.
+
+    ``ResultWriter.resume`` carries particle snapshots over but not the body poses written
+    next to them (``crashdem.export.write_body_pose``); the resumed run puts these back.
+
+    Returns
+    -------
+    dict
+        body group name -> ``vertices``, ``triangles``, ``position`` (k, 3) [m],
+        ``rotation`` (k, 3, 3) for the ``k`` snapshots with ``t <= t_cut``.
+    """
+    out: dict[str, dict] = {}
+    with h5py.File(result_path, "r", swmr=True) as f:
+        if "snapshots" not in f or "bodies" not in f["snapshots"]:
+            return out
+        ts = f["snapshots"]["t"][:]
+        k = int(np.count_nonzero(ts <= t_cut))
+        for name, g in f["snapshots"]["bodies"].items():
+            kk = min(k, g["position"].shape[0], g["rotation"].shape[0])
+            out[name] = {"vertices": g["vertices"][:], "triangles": g["triangles"][:],
+                         "position": g["position"][:kk], "rotation": g["rotation"][:kk]}
+    return out
