@@ -212,7 +212,7 @@ SCHEMA: dict[str, Any] = {
             "depth": F(1.0, "m", 0, 10, lo_open=True, doc="depth of the discontinuity below the free surface"),
             "lower_young_factor": F(3.0, "1", 0.01, 100, doc="lower-layer E / upper-layer E"),
             "lower_porosity": F(None, "1", 0.26, 0.6, doc="lower-layer target porosity, reached by a friction search on a trial column (null = use lower_deposition_friction_deg)", nullable=True),
-            "lower_deposition_friction_deg": F(0.0, "deg", 0, 90, hi_open=True, doc="friction while depositing the lower layer: 0 gives the densest random packing (compacted)"),
+            "lower_deposition_friction_deg": F(6.0, "deg", 0, 90, hi_open=True, doc="friction while depositing the lower layer (compacted): 6 deg gives porosity ~0.41 and settles 4x faster than 0 deg (~0.36)"),
         },
         "boundary_proximity": {
             "enabled": B(False, doc="rigid floor or wall nearer than modelled / different wall compliance"),
