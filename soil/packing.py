@@ -1206,8 +1206,17 @@ class PackingSpec:
         return _to_jsonable(self)
 
     def hash(self) -> str:
-        """SHA-256 of the canonical JSON of the spec and the format version (hex)."""
-        return _sha256_json({"format": FORMAT_VERSION, "spec": self.to_dict()})
+        """SHA-256 of the canonical JSON of the spec and the format version (hex).
+
+        The engine thread count is left out: results are bit-identical for any thread count,
+        so a packing deposited with 1 thread serves a run with 2.
+        """
+        d = self.to_dict()
+        dep = d.get("deposition")
+        if isinstance(dep, dict):
+            dep = {k: v for k, v in dep.items() if k != "threads"}
+            d = {**d, "deposition": dep}
+        return _sha256_json({"format": FORMAT_VERSION, "spec": d})
 
 
 def _to_jsonable(obj):

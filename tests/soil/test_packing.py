@@ -365,3 +365,19 @@ def test_slope_surface_on_45_degree_plane(compaction):
             near = lateral <= d
             worst = max(worst, float(depth[near].min()) if near.any() else np.inf)
     assert worst <= d, worst
+
+
+def test_spec_hash_ignores_thread_count_only():
+    """Oracle: results are bit-identical for any thread count (tests/soil/test_determinism.py),
+    so the cache key must not depend on it — but it must change with anything that does."""
+    import soil
+    from soil import packing as pk
+
+    mat = soil.Material(young=2e7, density=2650.0, friction_angle=0.5)
+
+    def spec(**dep):
+        return pk.PackingSpec(pk.BoxRegion((0, 0, 0), (1, 1, 1)), (mat,), (pk.LayerSpec(0.5),),
+                              pk.RadiusDistribution(0.05), deposition=pk.DepositionSettings(**dep))
+
+    assert spec(threads=1).hash() == spec(threads=2).hash() == spec().hash()
+    assert spec(threshold=0.02).hash() != spec().hash()
