@@ -84,6 +84,7 @@ import numpy as np
 
 from crashdem.scenario import Scenario, ScenarioError, parse_override
 from crashdem.signal import Signal
+from crashdem.results import _attr_value
 
 __all__ = [
     "CalibrationResult",
@@ -573,22 +574,6 @@ def _attr(group: h5py.Group | h5py.AttributeManager, key: str, value: Any) -> No
         attrs[key] = np.asarray(value, dtype=float)
     else:
         attrs[key] = _json(value)
-
-
-def _attr_value(v: Any) -> Any:
-    if isinstance(v, h5py.Empty):
-        return None
-    if isinstance(v, bytes):
-        return v.decode()
-    if isinstance(v, np.bool_):
-        return bool(v)
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, np.floating):
-        return float(v)
-    if isinstance(v, np.ndarray):
-        return v.tolist()
-    return v
 
 
 class EnsembleWriter:

@@ -42,6 +42,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from validation.campaign.calibration import load_soil_card  # noqa: E402
+
 SCENARIO = ROOT / "validation" / "scenarios" / "glider_real.toml"
 CARD = ROOT / "validation" / "soil_cards" / "calibrated_gravel.toml"
 DEFAULT_CACHE = Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem")) \
@@ -62,27 +64,6 @@ IDEAL = {"container.length": 4.8, "container.height": 4.8, "container.soil_depth
 GRAIN_RADII = (0.1, 0.08, 0.06)
 COARSE = {"soil.radius": 0.1, "soil.radius_spread": 0.1, "output.snapshots": 0,
           "output.plots": False}
-
-
-def load_card(path: Path) -> dict:
-    """Scenario overrides from a soil card (every key outside ``[card]``, schema-checked)."""
-    import tomllib
-
-    from crashdem import scenario as sc
-
-    data = tomllib.loads(path.read_text(encoding="utf-8"))
-    out: dict = {}
-
-    def walk(d, prefix):
-        for k, v in d.items():
-            if isinstance(v, dict):
-                walk(v, f"{prefix}{k}.")
-            else:
-                out[f"{prefix}{k}"] = v
-
-    walk({k: v for k, v in data.items() if k != "card"}, "")
-    sc.loads("", out)
-    return out
 
 
 #: Length of the primary-impact window after the first contact over which the planar-motion
@@ -246,7 +227,7 @@ def main(argv=None) -> int:
     base = dict(MODES[mode])
     card = None
     if CARD.exists() and not args.no_card:
-        base.update(load_card(CARD))
+        base.update(load_soil_card(CARD))
         card = str(CARD)
     if args.threads:
         base["scenario.threads"] = args.threads
