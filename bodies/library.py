@@ -389,3 +389,89 @@ def glider_fuselage(
         components=tuple(comps),
         assumptions=tuple(assumptions),
     )
+
+
+# ---------------------------------------------------------------------------- split nose
+def _shift(m: float, d) -> np.ndarray:
+    """Parallel-axis term ``m ((d.d) I - d d^T)`` [kg m^2]."""
+    d = np.asarray(d, dtype=float)
+    return m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+
+
+def split_nose(spec: RigidBodySpec, cut_station: float, areal_density: float,
+               extra_mass: float = 0.0) -> tuple[RigidBodySpec, RigidBodySpec]:
+    """Split a fuselage spec into a crushable nose (the shell ahead of ``cut_station``) and
+    the rest of the aircraft (``physics.structural_crush``, docs/glider.md).
+
+    Parameters
+    ----------
+    spec : RigidBodySpec
+        The whole fuselage (body frame at its CG; the construction frame has x forward from
+        the nose tip, so a station ``s`` aft of the tip is at ``x = -s``).
+    cut_station : float
+        Station of the cut aft of the nose tip [m], > 0 and inside the mesh; the nose takes
+        the triangles whose three vertices lie at or ahead of it.
+    areal_density : float
+        Shell areal density [kg/m^2] (the laminate, ``GliderBuildUp.laminate_areal_density``).
+    extra_mass : float
+        Point mass added at the nose shell's CG (instruments) [kg], >= 0.
+
+    Returns
+    -------
+    (rear, nose) : RigidBodySpec
+        Each in its own CG body frame, axes parallel to ``spec``'s. ``rear`` keeps all the
+        sensor mounts (offsets from its own CG) and ``spec.mass - nose.mass``; ``nose.
+        cg_in_construction_frame`` / ``rear.cg_in_construction_frame`` locate the two CGs.
+
+    Notes
+    -----
+    Thin-shell integrals (:func:`bodies.mesh.shell_mass_properties`) for the nose; the rear
+    part by subtraction with the parallel-axis theorem:
+    ``J_G = J_r + m_r S(d_r) + J_n + m_n S(d_n)``, ``S(d) = (d.d) I - d d^T``, ``d`` the part
+    CG minus the whole CG; the total mass, CG and inertia are conserved exactly.
+    """
+    if not extra_mass >= 0.0:
+        raise ValueError(f"split_nose.extra_mass={extra_mass!r}: must be >= 0 [kg]")
+    v_c = np.asarray(spec.vertices) + np.asarray(spec.cg_in_construction_frame)
+    station = -v_c[:, 0]
+    if not (np.isfinite(cut_station) and station.min() < cut_station < station.max()):
+        raise ValueError(f"split_nose.cut_station={cut_station!r}: must be in "
+                         f"({station.min():.3f}, {station.max():.3f}) [m] (inside the mesh)")
+    tri = np.asarray(spec.triangles)
+    ahead = np.all(station[tri] <= cut_station + 1e-9, axis=1)
+    if not ahead.any() or ahead.all():
+        raise ValueError(f"split_nose.cut_station={cut_station!r}: leaves no triangle on one "
+                         "side of the cut")
+    m_n, cg_n, j_n = shell_mass_properties(spec.vertices, tri[ahead], areal_density)
+    if extra_mass > 0.0:
+        m_n += extra_mass  # point mass at the shell CG: no own inertia
+    m_r = spec.mass - m_n
+    if not m_r > 0.0:
+        raise ValueError(f"split_nose: nose mass {m_n:.2f} kg must be < the body mass "
+                         f"{spec.mass:.2f} kg")
+    cg_r = -m_n * cg_n / m_r  # whole CG at the origin: m_r cg_r + m_n cg_n = 0
+    j_r = np.asarray(spec.inertia) - j_n - _shift(m_n, cg_n) - _shift(m_r, cg_r)
+    j_r = check_inertia(0.5 * (j_r + j_r.T), "split_nose rear inertia")
+
+    def sub(mask, cg):
+        used = np.unique(tri[mask])
+        remap = -np.ones(len(spec.vertices), dtype=np.int64)
+        remap[used] = np.arange(used.size)
+        return np.asarray(spec.vertices)[used] - cg, remap[tri[mask]]
+
+    v_n, t_n = sub(ahead, cg_n)
+    v_r, t_r = sub(~ahead, cg_r)
+    base_cg = np.asarray(spec.cg_in_construction_frame, dtype=float)
+    sensors = tuple(SensorMount(s.name, np.asarray(s.position) - cg_r, s.axis, s.kind,
+                                s.full_scale) for s in spec.sensors)
+    note = (f"split at station {cut_station:.3f} m: nose shell {m_n:.2f} kg "
+            f"(areal density {areal_density:.3f} kg/m^2 + {extra_mass:.2f} kg)")
+    rear = RigidBodySpec(name=f"{spec.name}_rear", mass=m_r, inertia=j_r, vertices=v_r,
+                         triangles=t_r, sensors=sensors,
+                         reference_dimensions=dict(spec.reference_dimensions),
+                         cg_in_construction_frame=base_cg + cg_r,
+                         assumptions=tuple(spec.assumptions) + (note,))
+    nose = RigidBodySpec(name=f"{spec.name}_nose", mass=m_n, inertia=j_n, vertices=v_n,
+                         triangles=t_n, cg_in_construction_frame=base_cg + cg_n,
+                         assumptions=(note,))
+    return rear, nose

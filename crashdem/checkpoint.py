@@ -7,14 +7,38 @@ API
 ``write_checkpoint(path, checkpoint) -> Path``      atomic: temp file, fsync, rename
 ``read_checkpoint(path) -> Checkpoint``
 ``Checkpoint.check_scenario(scenario)``             refuse another scenario (both hashes named)
+``Checkpoint.capture(model, t, loop, ...)``          the state of a running ``crashdem.run.Model``
 ``Checkpoint.restore(model)``                       put the saved state into a freshly built
-                                                    ``crashdem.run.Model`` (drop test)
+                                                    ``crashdem.run.Model`` (drop test, glider)
 
 A checkpoint holds the DEM state (``soil.Simulation.state_dict()``: arrays as datasets, the
 boundary objects pickled), the coupling and Exudyn state (``CoSimulation.state_dict()``, with
 the Exudyn reference configuration and ODE2 coordinates for a bit-exact restart), the pickled
-``crashdem.sensors.SensorSet`` (an opaque ``uint8`` dataset), the run loop's counters, the
-scenario hash and the crashdem version. The layout is documented in ``docs/restart.md``.
+``crashdem.sensors.SensorSet`` (an opaque ``uint8`` dataset), the state of every stateful
+*component* the model lists (``Model.components``: the glider's compliant walls and
+fuselage-wall contact, ...), the run loop's counters, the scenario hash and the crashdem
+version. The layout is documented in ``docs/restart.md``.
+
+Component protocol
+------------------
+Anything a run keeps outside the DEM, the coupling and the sensors (and that changes during
+the run) is a component, listed by name in ``Model.components``; it implements
+
+``state_dict() -> dict``            its evolving state (arrays, scalars, nested dicts; copies)
+``load_state_dict(d) -> None``      restore it in place, bit for bit
+``rebind(old_sim, new_sim)``        optional: replace references to boundary bodies of the
+                                    DEM being replaced by the same-index bodies of the DEM
+                                    rebuilt from the checkpoint (called before loading)
+
+A plain ``dict`` (exact type) is a component too: its items are the state (deep-copied, restored
+with ``clear()`` + ``update()``), e.g. a per-step value store read by sensors.
+
+Components are restored *in place*, so closures and other objects of the freshly built model
+that hold them (the glider's per-step wall update) keep working. The sensor set is pickled
+with the components as *persistent references* (``pickle`` ``persistent_id``): a sensor
+reading a component (``crashdem.glider.WallChannel``) is reconnected to the live component
+of the resumed model instead of a stale copy; the coupled Exudyn model is such a reference too
+(:data:`MODEL_REF`), restored in place through the coupling's state.
 
 Notes
 -----
@@ -26,6 +50,7 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import io
 import json
 import math
 import os
@@ -39,8 +64,10 @@ import numpy as np
 
 #: ``attrs["format"]`` of a checkpoint file
 FORMAT_NAME = "crashdem-checkpoint"
-#: layout version; a reader refuses other versions
-FORMAT_VERSION = 1
+#: layout version written (2: ``/components`` and component references in ``/sensors``)
+FORMAT_VERSION = 2
+#: layout versions this reader accepts (1 = drop-test checkpoints without components)
+READABLE_VERSIONS = (1, 2)
 #: scenario fields that cannot change the results (where files go, plots, checkpoint cadence);
 #: they are left out of the scenario hash so that a run can be resumed with other values
 HASH_EXCLUDED = (("output", "directory"), ("output", "plots"), ("output", "checkpoint_every_s"))
@@ -190,6 +217,12 @@ class Checkpoint:
     crashdem_version : str
     complete : bool
         True for the checkpoint written at the end of a finished run (the final state).
+    components : dict
+        name -> ``state_dict()`` of each component of the model (``Model.components``).
+    refs : dict
+        name -> live component object: when writing, the sensor set is pickled with these as
+        persistent references. After :func:`read_checkpoint` of a checkpoint with components,
+        ``sensors`` is a :class:`PickledSensors` resolved by :meth:`restore`.
     """
 
     t: float
@@ -200,6 +233,9 @@ class Checkpoint:
     scenario_hash: str = ""
     crashdem_version: str = ""
     complete: bool = False
+    components: dict = field(default_factory=dict)
+    #: live component objects the sensor pickle refers to by name (writing only)
+    refs: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if not math.isfinite(self.t):
@@ -228,28 +264,166 @@ class Checkpoint:
                 f"{self.crashdem_version}, this is crashdem {here}: a bit-identical restart "
                 "needs the same version; run without --resume")
 
+    @classmethod
+    def capture(cls, model: Any, t: float, loop: dict | None = None, scenario_hash: str = "",
+                complete: bool = False) -> "Checkpoint":
+        """The state of a running ``crashdem.run.Model`` at DEM time ``t`` [s].
+
+        DEM, coupling (with the Exudyn body), every component's ``state_dict()`` and the
+        sensor set (pickled at write time, with the components as references).
+        """
+        comps = _components(model)
+        return cls(t=float(t), soil=model.sim.state_dict(), cosim=model.cosim.state_dict(),
+                   sensors=model.sensors, loop=dict(loop or {}), scenario_hash=scenario_hash,
+                   complete=complete,
+                   components={name: _state_of(c) for name, c in comps.items()},
+                   refs=_refs(model, comps))
+
     def restore(self, model: Any) -> Any:
-        """Put the saved state into a freshly built drop-test ``crashdem.run.Model``.
+        """Put the saved state into a freshly built ``crashdem.run.Model`` (same scenario).
 
         The DEM is rebuilt by ``soil.Simulation.from_state_dict`` and the coupling by
-        ``coupling.CoSimulation.from_state_dict`` on the model's Exudyn body; the sensor set
-        is replaced by the saved one. Returns the model (modified in place).
+        ``coupling.CoSimulation.from_state_dict`` on the model's Exudyn body; every component
+        of the model is rebound to the new DEM (``rebind``) and loaded in place
+        (``load_state_dict``); the sensor set is replaced by the saved one, its references to
+        components resolved to the model's live components. Returns the model (modified in
+        place).
+
+        Raises
+        ------
+        CheckpointError
+            If the model's components are not the checkpoint's (names compared), or the
+            model keeps state outside the DEM without declaring components.
         """
         import coupling
         import soil
 
-        if model.pre_record is not None or model.extra:
+        comps = _components(model)
+        if sorted(comps) != sorted(self.components):
             raise CheckpointError(
-                "checkpoint restore: this model carries state outside the DEM, the coupling "
-                "and the sensors (pre_record/extra, e.g. the glider's compliant walls); "
-                "restart is available for the drop test only")
+                f"checkpoint restore: the checkpoint holds the components "
+                f"{sorted(self.components)}, the model has {sorted(comps)}; resume with the "
+                "same scenario and crashdem version")
+        old_sim = model.sim
         sim = soil.Simulation.from_state_dict(self.soil)
         cosim = coupling.CoSimulation.from_state_dict(sim, model.body_index, model.model,
                                                       self.cosim)
+        for name, c in comps.items():
+            if hasattr(c, "rebind"):
+                c.rebind(old_sim, sim)
+            _load_state(c, self.components[name])
         model.sim = sim
         model.cosim = cosim
-        model.sensors = self.sensors
+        sensors = self.sensors
+        if isinstance(sensors, PickledSensors):
+            sensors = sensors.load(_refs(model, comps))
+        model.sensors = sensors
         return model
+
+
+class PickledSensors:
+    """A sensor set read from a checkpoint that refers to components: unpickled by
+    :meth:`load` once the live components of the resumed model exist."""
+
+    def __init__(self, blob: bytes, refs: list[str]) -> None:
+        self.blob = bytes(blob)
+        self.refs = list(refs)
+
+    def load(self, components: dict[str, Any]) -> Any:
+        missing = [r for r in self.refs if r not in components]
+        if missing:
+            raise CheckpointError(f"checkpoint sensors refer to components {missing} the "
+                                  f"model does not have (it has {sorted(components)})")
+        return _RefUnpickler(io.BytesIO(self.blob), components).load()
+
+
+class _RefPickler(pickle.Pickler):
+    """Pickler writing the given objects as persistent references (their names)."""
+
+    def __init__(self, file: Any, refs: dict[str, Any]) -> None:
+        super().__init__(file, protocol=PICKLE_PROTOCOL)
+        self._names = {id(obj): name for name, obj in refs.items()}
+        self.used: set[str] = set()
+
+    def persistent_id(self, obj: Any) -> str | None:
+        name = self._names.get(id(obj))
+        if name is not None:
+            self.used.add(name)
+        return name
+
+
+class _RefUnpickler(pickle.Unpickler):
+    def __init__(self, file: Any, refs: dict[str, Any]) -> None:
+        super().__init__(file)
+        self._refs = refs
+
+    def persistent_load(self, pid: Any) -> Any:
+        try:
+            return self._refs[pid]
+        except KeyError:
+            raise CheckpointError(f"checkpoint sensors refer to an unknown component "
+                                  f"{pid!r}") from None
+
+
+def check_restartable(model: Any, what: str = "checkpoints") -> None:
+    """Raise ``ScenarioError`` before a run starts if ``model`` cannot be checkpointed (state
+    outside the DEM without declared components, a component or an Exudyn model without
+    ``state_dict``), instead of failing at the first checkpoint."""
+    from crashdem.scenario import ScenarioError
+
+    try:
+        _components(model)
+        model.model.state_dict()
+    except (CheckpointError, NotImplementedError) as exc:
+        raise ScenarioError(f"{what}: this scenario cannot be restarted: {exc}") from None
+
+
+#: name of the coupled Exudyn model as a persistent reference of the sensor pickle (a sensor
+#: reading the model, e.g. the crush element's channels, sees the resumed model)
+MODEL_REF = "__coupled_model__"
+
+
+def _refs(model: Any, comps: dict[str, Any]) -> dict[str, Any]:
+    """Objects the sensor pickle refers to by name: the components and the coupled Exudyn
+    model (restored in place by ``CoSimulation.from_state_dict``)."""
+    out = dict(comps)
+    if getattr(model, "model", None) is not None:
+        out[MODEL_REF] = model.model
+    return out
+
+
+def _state_of(c: Any) -> Any:
+    if type(c) is dict:
+        return copy.deepcopy(c)
+    return c.state_dict()
+
+
+def _load_state(c: Any, d: Any) -> None:
+    if type(c) is dict:
+        c.clear()
+        c.update(copy.deepcopy(d))
+    else:
+        c.load_state_dict(d)
+
+
+def _components(model: Any) -> dict[str, Any]:
+    """``model.components``, checked against the component protocol."""
+    comps = dict(getattr(model, "components", None) or {})
+    if not comps and (model.pre_record is not None or model.extra):
+        raise CheckpointError(
+            "checkpoint: this model carries state outside the DEM, the coupling and the "
+            "sensors (pre_record/extra) but declares no components (Model.components); "
+            "a restart would lose that state")
+    for name, c in comps.items():
+        if type(c) is dict:  # a plain dict: its items are the state
+            continue
+        for meth in ("state_dict", "load_state_dict"):
+            if not callable(getattr(c, meth, None)):
+                raise CheckpointError(
+                    f"checkpoint: component {name!r} ({type(c).__name__}) has no {meth}(); "
+                    "every entry of Model.components must implement state_dict() and "
+                    "load_state_dict(d)")
+    return comps
 
 
 def write_checkpoint(path: str | os.PathLike, ckpt: Checkpoint) -> Path:
@@ -275,10 +449,19 @@ def write_checkpoint(path: str | os.PathLike, ckpt: Checkpoint) -> Path:
             _put(f, "soil", ckpt.soil)
             _put(f, "cosim", ckpt.cosim)
             _put(f, "loop", dict(ckpt.loop))
-            blob = pickle.dumps(ckpt.sensors, protocol=PICKLE_PROTOCOL)
+            _put(f, "components", dict(ckpt.components))
+            if isinstance(ckpt.sensors, PickledSensors):
+                blob, used, typ = ckpt.sensors.blob, ckpt.sensors.refs, "PickledSensors"
+            else:
+                buf = io.BytesIO()
+                pk = _RefPickler(buf, ckpt.refs)
+                pk.dump(ckpt.sensors)
+                blob, used = buf.getvalue(), sorted(pk.used)
+                typ = f"{type(ckpt.sensors).__module__}.{type(ckpt.sensors).__qualname__}"
             d = f.create_dataset("sensors", data=np.frombuffer(blob, dtype=np.uint8))
             d.attrs["kind"] = "pickle"
-            d.attrs["type"] = f"{type(ckpt.sensors).__module__}.{type(ckpt.sensors).__qualname__}"
+            d.attrs["type"] = typ
+            d.attrs["refs"] = json.dumps(list(used))
         fd = os.open(tmp, os.O_RDONLY)
         try:
             os.fsync(fd)
@@ -317,14 +500,18 @@ def read_checkpoint(path: str | os.PathLike) -> Checkpoint:
         if fmt != FORMAT_NAME:
             raise CheckpointError(f"{path}: attrs['format']={fmt!r}: not a {FORMAT_NAME} file")
         ver = int(f.attrs["format_version"])
-        if ver != FORMAT_VERSION:
-            raise CheckpointError(f"{path}: format_version={ver}: this reader needs "
-                                  f"{FORMAT_VERSION}")
+        if ver not in READABLE_VERSIONS:
+            raise CheckpointError(f"{path}: format_version={ver}: this reader accepts "
+                                  f"{READABLE_VERSIONS}")
+        ds = f["sensors"]
+        refs = json.loads(ds.attrs.get("refs", "[]"))
+        sensors = PickledSensors(ds[()].tobytes(), refs) if refs else _get(ds)
         return Checkpoint(t=float(f.attrs["t"]), soil=_get(f["soil"]), cosim=_get(f["cosim"]),
-                          sensors=_get(f["sensors"]), loop=_get(f["loop"]),
+                          sensors=sensors, loop=_get(f["loop"]),
                           scenario_hash=str(f.attrs["scenario_hash"]),
                           crashdem_version=str(f.attrs["crashdem_version"]),
-                          complete=bool(f.attrs["complete"]))
+                          complete=bool(f.attrs["complete"]),
+                          components=_get(f["components"]) if "components" in f else {})
 
 
 def read_body_poses(result_path: str | os.PathLike, t_cut: float) -> dict[str, dict]:

@@ -123,7 +123,10 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", required=True)
     d.add_argument("--set", action="append", metavar="KEY=VALUE")
     d.add_argument("--full-confirm", type=int, default=None,
-                   help="confirm the top hypotheses with this many full DEM runs at most")
+                   help="confirm the top hypotheses with this many full DEM runs at most "
+                        "(in parallel on Dask: a LocalCluster, or --scheduler; --workers 0 "
+                        "runs them in this process)")
+    ensemble.add_cluster_arguments(d, set_option=False)
     d.set_defaults(func=_cmd_diagnose)
 
     s = sub.add_parser("schema", help="print the scenario field reference (Markdown)")

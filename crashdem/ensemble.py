@@ -15,14 +15,16 @@ API
 ``sweep(scenario, spec, out, member_fn=None, cluster=ClusterSettings(), ...) -> Path``
 ``calibrate(scenario, params, objective_fn, out, member_fn=None, ...) -> CalibrationResult``
 ``map_overrides(scenario, [overrides, ...], out, member_fn, ...)``: one member per overrides
-    dict (the fan-out behind ``sweep``; usable by the diagnosis for its confirmation runs);
+    dict (the fan-out behind ``sweep`` and the diagnosis confirmation runs,
+    ``crashdem.diagnosis.distributed``);
 ``run_members(members, member_fn, writer, client, ...)``: the lower-level fan-out used by all.
 ``RunMember(threads=1)``: the default member function (``crashdem.run.run_scenario``).
 ``ChannelObjective(reference, channel, metric="iso18571"|"rms")``: a finished member ->
     objective value (to minimise).
 ``open_ensemble(path) -> EnsembleResult``: reader.
 CLI hooks (wired by ``crashdem/cli.py``): ``add_sweep_arguments(parser)``,
-``sweep_command(args)``, ``add_calibrate_arguments(parser)``, ``calibrate_command(args)``.
+``sweep_command(args)``, ``add_calibrate_arguments(parser)``, ``calibrate_command(args)``,
+``add_cluster_arguments(parser, set_option)`` (also used by ``crashdem diagnose``).
 
 Member function protocol: ``member_fn(member: Member, path: Path) -> None`` writes a crashdem
 result at ``path`` (a fresh temporary name; the task renames it atomically when the function
@@ -100,6 +102,7 @@ __all__ = [
     "RunMember",
     "SweepSpec",
     "add_calibrate_arguments",
+    "add_cluster_arguments",
     "add_sweep_arguments",
     "calibrate",
     "calibrate_command",
@@ -1411,7 +1414,15 @@ def open_ensemble(path: str | os.PathLike) -> EnsembleResult:
 # --------------------------------------------------------------------------------------------
 # CLI hooks (wired by crashdem/cli.py)
 # --------------------------------------------------------------------------------------------
-def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
+def add_cluster_arguments(p: argparse.ArgumentParser, set_option: bool = True) -> None:
+    """The cluster options shared by ``sweep``, ``calibrate`` and ``diagnose --full-confirm``:
+    ``--scheduler``, ``--workers``, ``--member-threads``, ``--retries``, ``--work-dir``,
+    ``--keep-members`` (and ``--set`` unless ``set_option=False``, for a parser that has its
+    own)."""
+    _add_cluster_arguments(p, set_option)
+
+
+def _add_cluster_arguments(p: argparse.ArgumentParser, set_option: bool = True) -> None:
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="existing Dask scheduler (default: a LocalCluster on this machine)")
     p.add_argument("--workers", type=int, default=None, metavar="N",
@@ -1424,8 +1435,9 @@ def _add_cluster_arguments(p: argparse.ArgumentParser) -> None:
                         "workers)")
     p.add_argument("--keep-members", action="store_true",
                    help="keep the member result files after a successful ensemble")
-    p.add_argument("--set", action="append", metavar="KEY=VALUE",
-                   help="override a scenario field for every member")
+    if set_option:
+        p.add_argument("--set", action="append", metavar="KEY=VALUE",
+                       help="override a scenario field for every member")
 
 
 def add_sweep_arguments(parser: argparse.ArgumentParser) -> None:

@@ -49,10 +49,13 @@ from crashdem.sensors import _Sensor
 __all__ = [
     "BodyWallContact",
     "CompliantWall",
+    "CrushChannel",
+    "NOSE_CUT_STATION",
     "PlywoodPanel",
     "POPLAR_PLYWOOD_DENSITY",
     "WALL_DAMPING_RATIO",
     "build_glider_model",
+    "coupled_specs",
     "crash_features",
     "glider_spec",
     "kinematic_identity",
@@ -83,6 +86,11 @@ FUSELAGE_FRICTION_DEG = 30.0
 PRE_CONTACT_TIME = 0.02
 #: Threshold of the event duration, as a fraction of the reference peak 20 g [-]
 DURATION_THRESHOLD_G = 2.0
+#: Station of the crushable nose's aft end [m] (``physics.structural_crush``): the nose cone
+#: ahead of the cockpit (the loft's elliptic nose is 0.70 m long; the front accelerometers at
+#: 0.40 m, which broke in the test, sit in it); an assumption, longer than the default stroke
+#: 0.2 m. The nose takes the mesh triangles at or ahead of it.
+NOSE_CUT_STATION = 0.5
 
 
 # ---------------------------------------------------------------------------------------------
@@ -263,6 +271,33 @@ class CompliantWall:
         p = self.panel
         return 0.5 * p.stiffness * self.u**2 + 0.5 * p.modal_mass * self.v**2
 
+    # restart (``crashdem.checkpoint`` component protocol)
+    _STATE = ("u", "v", "t_last", "force", "extra", "max_u", "preload")
+
+    def state_dict(self) -> dict[str, Any]:
+        """Restart state of the support (SI; copies): displacement, half-step velocity, clock,
+        loads, preload and the rest geometry."""
+        d: dict[str, Any] = {k: getattr(self, k) for k in self._STATE}
+        d["x0"] = self.x0.copy()
+        d["e"] = self.e.copy()
+        return d
+
+    def load_state_dict(self, d: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` in place (bit-exact)."""
+        for k in self._STATE:
+            setattr(self, k, d[k])
+        self.x0 = np.array(d["x0"], dtype=float)
+        self.e = np.array(d["e"], dtype=float)
+
+    def rebind(self, old_sim: Any, new_sim: Any) -> None:
+        """Carry the panel body over to a DEM rebuilt from its state dict (same index)."""
+        for i, b in enumerate(old_sim.boundaries):
+            if b is self.body:
+                self.body = new_sim.boundaries[i]
+                return
+        raise ValueError(f"CompliantWall {self.name!r}: its body is not a boundary of the "
+                         "simulation being replaced")
+
 
 class BodyWallContact:
     """Penalty contact of the fuselage surface against the container planes.
@@ -343,6 +378,20 @@ class BodyWallContact:
         self._t_prev = t
         return f_tot, t_tot, loads
 
+    # restart (``crashdem.checkpoint`` component protocol); the walls are components of their
+    # own (restored in place), referenced here, not copied
+    def state_dict(self) -> dict[str, Any]:
+        """Restart state: last forces, their maxima, previous penetrations and clock."""
+        return {"forces": dict(self.forces), "max_force": dict(self.max_force),
+                "d_prev": dict(self._d_prev), "t_prev": self._t_prev}
+
+    def load_state_dict(self, d: dict[str, Any]) -> None:
+        """Restore :meth:`state_dict` in place (bit-exact)."""
+        self.forces = dict(d["forces"])
+        self.max_force = dict(d["max_force"])
+        self._d_prev = dict(d["d_prev"])
+        self._t_prev = d["t_prev"]
+
 
 # ---------------------------------------------------------------------------------------------
 # channels of the walls (read from the objects above; no engine query)
@@ -378,8 +427,68 @@ class WallChannel(_Sensor):
         if self.quantity == "deflection":
             return float(self.wall.u)
         if self.quantity == "contact_force":
-            return float(self.contact.forces.get(self.wall.name, 0.0))
+            cs = self.contact if isinstance(self.contact, (tuple, list)) else (self.contact,)
+            return float(sum(c.forces.get(self.wall.name, 0.0) for c in cs))
         return float(self.wall.force - (self.wall.preload or 0.0))
+
+
+@dataclass(frozen=True, kw_only=True)
+class CrushChannel(_Sensor):
+    """The crush element of the nose (``physics.structural_crush``) as a channel: ``quantity``
+    = "load" (compressive axial load, N) or "stroke" (nose displacement aft relative to the
+    fuselage, m), read from the ``bodies.ExudynCrushableBody`` after each step."""
+
+    model: Any = field(default=None, compare=False)
+    quantity: str = "load"
+    kind = "crush"
+
+    @property
+    def unit(self) -> str:  # type: ignore[override]
+        return "m" if self.quantity == "stroke" else "N"
+
+    def __post_init__(self) -> None:
+        self._check_common()
+        if self.quantity not in ("load", "stroke"):
+            raise ValueError(f"CrushChannel.quantity={self.quantity!r}: must be 'load' or "
+                             "'stroke'")
+
+    def info(self) -> dict[str, Any]:
+        out = super().info()
+        out.update(quantity=self.quantity)
+        return out
+
+    def _measure(self, bodies, contacts, gravity, up):
+        if self.quantity == "stroke":
+            return float(getattr(self.model, "compression", 0.0))
+        return float(self.model.load)
+
+
+@dataclass(frozen=True, kw_only=True)
+class ValueChannel(_Sensor):
+    """A scalar of the glider model as a channel: ``source`` maps the shared record ``store``
+    (a dict filled once per exchange by the model's ``pre_record``) to the value in ``unit``."""
+
+    store: Any = field(default=None, compare=False)
+    key: str = ""
+    component: int = 0
+    channel_unit: str = "N"
+    kind = "model"
+
+    @property
+    def unit(self) -> str:  # type: ignore[override]
+        return self.channel_unit
+
+    def __post_init__(self) -> None:
+        self._check_common()
+
+    def info(self) -> dict[str, Any]:
+        out = super().info()
+        out.update(key=self.key, component=int(self.component))
+        return out
+
+    def _measure(self, bodies, contacts, gravity, up):
+        v = self.store.get(self.key)
+        return 0.0 if v is None else float(np.asarray(v)[self.component])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -443,6 +552,21 @@ def glider_spec(scen: Scenario):
     return bodies.glider_fuselage(**kw)
 
 
+def coupled_specs(scen: Scenario):
+    """The Exudyn bodies of a scenario: ``(whole, rear, nose)``. Without
+    ``physics.structural_crush`` ``rear`` is the whole fuselage and ``nose`` is None; with it
+    the shell ahead of ``NOSE_CUT_STATION`` is the nose (``bodies.split_nose``, laminate areal
+    density of the build-up) and ``rear`` the rest (its sensors, mass and inertia)."""
+    import bodies
+
+    spec = glider_spec(scen)
+    if not scen["physics.structural_crush.enabled"]:
+        return spec, spec, None
+    rear, nose = bodies.split_nose(spec, NOSE_CUT_STATION,
+                                   bodies.GliderBuildUp().laminate_areal_density)
+    return spec, rear, nose
+
+
 def wall_panels(scen: Scenario) -> dict[str, PlywoodPanel]:
     """The plate-theory panels of the rear and side walls of a scenario's container.
 
@@ -478,6 +602,60 @@ def _check_scenario(scen: Scenario) -> None:
     if c["soil_depth"] > c["height"]:
         raise ScenarioError(f"container.soil_depth={c['soil_depth']!r}: must be <= "
                             f"container.height={c['height']!r} [m]")
+
+
+def _crush_exchange(sim, b, nb, model, nose_contact, t, f, tq, loads, h, store):
+    """Once per exchange (after the DEM step, at ``t_{n+1}``) with the crushable nose.
+
+    1. the nose's wall contacts are evaluated and their loads added to the panels';
+    2. the nose's external load (soil + walls) is handed to Exudyn for the next step;
+    3. the connector wrench on the fuselage (rear body), evaluated on the DEM poses at
+       ``t_{n+1}`` with the Exudyn half-step velocities, is added to the fuselage's wrench
+       (so the coupling's velocity prediction, the accelerometers and the ``contact_force``
+       channels see every load on the rear body) and declared to the model, which removes
+       it again from the Exudyn load (its own connector produces it);
+    4. the window velocity of the fuselage's DEM body is corrected for the loads added
+       after the coupling's kick (walls, connector), and the nose's DEM body is placed at
+       ``x_e + (h/2) v_e`` with the window velocity ``v_e + h a_{n+1}`` (leapfrog, as
+       ``coupling.CoSimulation`` does for the fuselage).
+
+    Returns the extra force and torque on the fuselage (walls + connector).
+    """
+    from coupling import rotation_increment
+
+    fn, tqn, loads_n = nose_contact.evaluate(t, nb.position, nb.rotation, nb.velocity,
+                                             nb.angular_velocity)
+    for k, v in loads_n.items():
+        loads[k] = loads.get(k, 0.0) + v
+    f_nose = np.asarray(nb.force, dtype=float) + fn
+    t_nose = np.asarray(nb.torque, dtype=float) + tqn
+    # external contact load on the aircraft (soil + walls on the fuselage and the nose)
+    store["contact_force"] = np.asarray(b.force, dtype=float) + f + f_nose
+    model.apply_nose(f_nose, t_nose)
+    fr, tr, fcn, tcn, _ = model.connector_wrench(
+        b.position, b.rotation, model.velocity(), model.angular_velocity(),
+        nb.position, nb.rotation, model.nose_velocity(), model.nose_angular_velocity())
+    model.add_connector_load(fr, tr)
+    f = f + fr
+    tq = tq + tr
+    g = np.asarray(sim.gravity, dtype=float)
+    # fuselage: the coupling kicked with the DEM wrench only
+    r = np.asarray(b.rotation)
+    jw = r @ model.spec.inertia @ r.T
+    b.set_kinematics(np.array(b.position), r, np.asarray(b.velocity) + h * f / model.spec.mass,
+                     np.asarray(b.angular_velocity) + h * np.linalg.solve(jw, tq))
+    # nose
+    ns = model.nose_spec
+    xe, re_, ve, we = (model.nose_position(), model.nose_rotation(), model.nose_velocity(),
+                       model.nose_angular_velocity())
+    a = (f_nose + fcn) / ns.mass + g
+    jn = re_ @ ns.inertia @ re_.T
+    alpha = np.linalg.solve(jn, t_nose + tcn - np.cross(we, jn @ we))
+    nb.set_kinematics(xe + 0.5 * h * ve, rotation_increment(we, 0.5 * h) @ re_, ve + h * a,
+                      we + h * alpha)
+    store["nose_velocity"] = ve + 0.5 * h * a  # synchronised with the DEM time t_{n+1}
+    store["crush_force_on_fuselage"] = fr
+    return f, tq
 
 
 def build_glider_model(scen: Scenario, cache_dir, progress=None):
@@ -541,7 +719,7 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
                    for name, (p, n) in geo.items()}
 
     # fuselage and its release
-    spec = glider_spec(scen)
+    spec, rear, nose = coupled_specs(scen)
     gl = scen["glider"]
     speed = gl["release_speed"]
     path = scen["impactor.angle_deg"]
@@ -578,32 +756,55 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     x0, v0 = release_state(x_rel, v_rel, t_start, g)
     t_contact = t_ff - t_start
 
-    body = coupling.boundary_for(spec, imp_mat, position=x0, rotation=rot, velocity=v0)
+    # with the crushable nose the fuselage (rear) and nose CGs are offset from the whole CG
+    cg_whole = np.asarray(spec.cg_in_construction_frame, dtype=float)
+    x0_r = x0 + rot @ (np.asarray(rear.cg_in_construction_frame) - cg_whole)
+    body = coupling.boundary_for(rear, imp_mat, position=x0_r, rotation=rot, velocity=v0)
     boundaries = [fixed, body] + list(wall_bodies.values())
+    nose_index = None
+    if nose is not None:
+        x0_n = x0 + rot @ (np.asarray(nose.cg_in_construction_frame) - cg_whole)
+        boundaries.append(coupling.boundary_for(nose, imp_mat, position=x0_n, rotation=rot,
+                                                velocity=v0))
+        nose_index = len(boundaries) - 1
+        if scen["solver.exchange_every"] != 1:
+            raise ScenarioError(f"solver.exchange_every={scen['solver.exchange_every']!r}: "
+                                "must be 1 with physics.structural_crush (the nose is "
+                                "exchanged every DEM step)")
     threads = scen["scenario.threads"] or None
     sim = soil.Simulation(particles, mats, boundaries, gravity=tuple(g), dt=scen["solver.dt"],
                           safety=scen["solver.safety"], threads=threads)
     if scen["physics.cohesion.enabled"]:
         sim.bond_contacts()
-    model = bodies.ExudynRigidBody(spec, position=x0, rotation=rot, velocity=v0,
-                                   gravity=tuple(g))
+    if nose is None:
+        model = bodies.ExudynRigidBody(spec, position=x0, rotation=rot, velocity=v0,
+                                       gravity=tuple(g))
+    else:
+        from bodies.crush import ExudynCrushableBody
+
+        model = ExudynCrushableBody(rear, nose, scen["physics.structural_crush.crush_force"],
+                                    scen["physics.structural_crush.stroke"], sim.dt,
+                                    position=x0_r, rotation=rot, velocity=v0, gravity=tuple(g))
     cosim = coupling.CoSimulation(sim, 1, model, exchange_every=scen["solver.exchange_every"])
 
     walls = {name: CompliantWall(name, panels[name], wall_bodies[name], -np.asarray(n))
              for name, (_, n) in geo.items()}
-    crush = None
-    if scen["physics.structural_crush.enabled"]:
-        crush = scen["physics.structural_crush.crush_force"]
-    contact = BodyWallContact(
-        spec.vertices, spec.mass,
-        [("floor", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), None)]
-        + [(name, p, n, walls[name]) for name, (p, n) in geo.items()],
-        crush_force=crush)
+    wall_list = ([("floor", (0.0, 0.0, 0.0), (0.0, 0.0, 1.0), None)]
+                 + [(name, p, n, walls[name]) for name, (p, n) in geo.items()])
+    # the crushable nose (when on) limits the nose load itself: no cap on the wall contacts
+    contact = BodyWallContact(rear.vertices, rear.mass, wall_list)
+    nose_contact = None if nose is None else BodyWallContact(nose.vertices, nose.mass,
+                                                             wall_list)
+    h_dem = sim.dt
+    store: dict[str, Any] = {}
 
     def pre_record(t, sim_, model_):
         b = sim_.boundaries[1]
         f, tq, loads = contact.evaluate(t, b.position, b.rotation, b.velocity,
                                         b.angular_velocity)
+        if nose_index is not None:
+            f, tq = _crush_exchange(sim_, b, sim_.boundaries[nose_index], model_,
+                                    nose_contact, t, f, tq, loads, h_dem, store)
         if np.any(f):
             b.force[:] = np.asarray(b.force) + f
             b.torque[:] = np.asarray(b.torque) + tq
@@ -619,24 +820,41 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
                                scen["physics.sensor_dynamics.damping_ratio"])
         if scen["physics.sensor_dynamics.cfc"] is not None:
             cfc = scen["physics.sensor_dynamics.cfc"]
-    out = sn.sensors_for_body(spec.sensors, "glider", cfc=cfc, accel_full_scale=fs_g,
+    out = sn.sensors_for_body(rear.sensors, "glider", cfc=cfc, accel_full_scale=fs_g,
                               failure_factor=scen["instrumentation.accel_failure_factor"],
                               dynamics=dyn)
-    out += [
-        sn.PitchAngle(name="pitch_angle_lab", body="glider", method="integrated",
-                      initial="zero", cfc=cfc),
-        sn.BodyForce(name="contact_force_x", body="glider", quantity="force",
-                     axis=(1.0, 0.0, 0.0), cfc=cfc),
-        sn.BodyForce(name="contact_force_z", body="glider", quantity="force",
-                     axis=(0.0, 0.0, 1.0), cfc=cfc),
-    ]
+    out.append(sn.PitchAngle(name="pitch_angle_lab", body="glider", method="integrated",
+                             initial="zero", cfc=cfc))
+    if nose is None:
+        out += [sn.BodyForce(name="contact_force_x", body="glider", quantity="force",
+                             axis=(1.0, 0.0, 0.0), cfc=cfc),
+                sn.BodyForce(name="contact_force_z", body="glider", quantity="force",
+                             axis=(0.0, 0.0, 1.0), cfc=cfc)]
+    else:
+        # contact_force_*: soil + walls on the aircraft (fuselage and nose); fuselage_force_*:
+        # every load on the fuselage (rear body) incl. the crush element; nose velocity for
+        # the momentum balance of the two bodies
+        out += [ValueChannel(name=f"contact_force_{ax}", store=store, key="contact_force",
+                             component=i, channel_unit="N", cfc=cfc) for ax, i in (("x", 0),
+                                                                                   ("z", 2))]
+        out += [sn.BodyForce(name=f"fuselage_force_{ax}", body="glider", quantity="force",
+                             axis=e, cfc=cfc) for ax, e in (("x", (1.0, 0.0, 0.0)),
+                                                           ("z", (0.0, 0.0, 1.0)))]
+        out += [ValueChannel(name=f"nose_velocity_{ax}", store=store, key="nose_velocity",
+                             component=i, channel_unit="m/s", cfc=cfc) for ax, i in (("x", 0),
+                                                                                    ("z", 2))]
     for name, w in walls.items():
         out.append(WallChannel(name=f"{name}_force", wall=w, contact=contact, quantity="force",
                                cfc=cfc))
         out.append(WallChannel(name=f"{name}_deflection", wall=w, contact=contact,
                                quantity="deflection", cfc=cfc))
-    out.append(WallChannel(name="nose_rear_wall_force", wall=walls["rear_wall"], contact=contact,
+    both = contact if nose_contact is None else (contact, nose_contact)
+    out.append(WallChannel(name="nose_rear_wall_force", wall=walls["rear_wall"], contact=both,
                            quantity="contact_force", cfc=cfc))
+    if nose is not None:
+        out.append(CrushChannel(name="nose_crush_load", model=model, quantity="load", cfc=cfc))
+        out.append(CrushChannel(name="nose_crush_stroke", model=model, quantity="stroke",
+                                cfc=cfc))
     sensors = sn.SensorSet(out, fs=scen["instrumentation.sample_rate"], t0=0.0,
                            gravity=tuple(g))
 
@@ -644,9 +862,18 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     extra = {"walls": walls, "contact": contact, "panels": panels, "release_position": x_rel,
              "release_velocity": v_rel, "release_time": -t_start, "t_start_after_release": t_start,
              "grain_envelope": delta, "contact_point_body": r_sup @ rot,
-             "pitch0": math.radians(pitch), "slope_normal": n_out}
-    return rn.Model(scen, sim, 1, spec, model, cosim, sensors, packing, surface_z, t_contact,
-                    t_contact + scen["solver.t_end"], {}, "glider", extra, pre_record)
+             "pitch0": math.radians(pitch), "slope_normal": n_out,
+             "nose_contact": nose_contact, "nose_index": nose_index, "whole_spec": spec}
+    # stateful parts outside the DEM, the coupling and the sensors (restart checkpoints,
+    # crashdem.checkpoint): every such object goes here, named
+    components: dict[str, Any] = {f"wall.{name}": w for name, w in walls.items()}
+    components["wall_contact"] = contact
+    if nose_contact is not None:
+        components["nose_wall_contact"] = nose_contact
+        components["crush_store"] = store  # read by the ValueChannel sensors
+    return rn.Model(scen, sim, 1, rear, model, cosim, sensors, packing, surface_z, t_contact,
+                    t_contact + scen["solver.t_end"], {}, "glider", extra, pre_record,
+                    components=components)
 
 
 # ---------------------------------------------------------------------------------------------

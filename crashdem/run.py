@@ -60,6 +60,11 @@ class Model:
     extra: dict[str, Any] = field(default_factory=dict)  # scenario-specific objects
     #: called once per DEM step before the sensors record (e.g. compliant walls), or None
     pre_record: Any = None
+    #: stateful objects outside the DEM, the coupling and the sensors (compliant walls, contact
+    #: laws, crush elements...), by name; each has ``state_dict()`` / ``load_state_dict(d)``
+    #: (and optionally ``rebind(old_sim, new_sim)``) so that checkpoints capture and restore
+    #: them (``crashdem.checkpoint``)
+    components: dict[str, Any] = field(default_factory=dict)
 
 
 def _deg(x: float) -> float:
@@ -363,11 +368,6 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
     path.parent.mkdir(parents=True, exist_ok=True)
     ckpt_path = ck.checkpoint_path(path)
     every = scen["output.checkpoint_every_s"]
-    if (resume or every is not None) and scen["scenario.kind"] == "glider_crash":
-        raise ScenarioError(
-            f"output.checkpoint_every_s={every!r} / --resume: restart from checkpoints is "
-            "available for the drop test only (scenario.kind='drop_test'); the glider crash "
-            "keeps wall and contact state outside the DEM")
     saved = None
     if resume:
         saved = ck.read_checkpoint(ckpt_path)
@@ -383,6 +383,9 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
     wall0 = time.perf_counter()
     log.info("building %s (packing cache: %s)", scen["scenario.name"], cache)
     m = build_model(scen, cache)
+    if saved is not None or every is not None:
+        ck.check_restartable(m, f"output.checkpoint_every_s={every!r}"
+                             + (" / --resume" if resume else ""))
     if saved is not None:
         saved.restore(m)
         log.info("resuming %s from its checkpoint at t = %.6g s (%s)", scen["scenario.name"],
@@ -434,10 +437,8 @@ def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progr
             # everything drained so far is on disk before the checkpoint names it as kept
             w.append_sensors(m.sensors)
             w.flush()
-            ck.write_checkpoint(ckpt_path, ck.Checkpoint(
-                t=float(t), soil=m.sim.state_dict(), cosim=m.cosim.state_dict(),
-                sensors=m.sensors, loop=dict(state), scenario_hash=scen_hash,
-                complete=complete))
+            ck.write_checkpoint(ckpt_path, ck.Checkpoint.capture(
+                m, t, loop=dict(state), scenario_hash=scen_hash, complete=complete))
 
         def record(t, sim, model):
             if m.pre_record is not None:

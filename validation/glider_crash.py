@@ -20,6 +20,7 @@ Usage::
     python validation/glider_crash.py --small       # test-suite size (~800 grains, < 2 min)
     python validation/glider_crash.py               # default resolution
     python validation/glider_crash.py --studies     # + sensitivity studies
+    python validation/glider_crash.py --set physics.structural_crush.enabled=true  # crushable nose
 
 The soil card ``validation/soil_cards/calibrated_gravel.toml`` is used when it exists (unless
 ``--no-card``); otherwise the drop scenarios' soil of the scenario file. The LAST printed line is
@@ -73,8 +74,8 @@ COARSE = {"soil.radius": 0.1, "soil.radius_spread": 0.1, "output.snapshots": 0,
 PLANAR_WINDOW = 0.05
 
 
-def checks(sig: dict, spec_mass: float, mounts: dict, t_contact: float, full_scale_g: float
-           ) -> dict:
+def checks(sig: dict, spec_mass: float, mounts: dict, t_contact: float, full_scale_g: float,
+           nose_mass: float | None = None) -> dict:
     """Physics checks of a record (raw channels); each entry holds the numbers compared."""
     from crashdem.glider import G0, kinematic_identity
     from crashdem.signal import Signal
@@ -89,6 +90,13 @@ def checks(sig: dict, spec_mass: float, mounts: dict, t_contact: float, full_sca
     fx = sig["contact_force_x"].data
     vx = sig["cg_velocity_x"].data
     out["momentum_x"] = {"impulse_Ns": trap(fx), "m_dv_Ns": spec_mass * float(vx[-1] - vx[0])}
+    if nose_mass is not None:
+        # crushable nose: soil + wall impulse on the aircraft = change of the momentum of the
+        # fuselage and the nose; the fuselage alone: every load on it incl. the crush element
+        vn = sig["nose_velocity_x"].data
+        out["momentum_x"]["m_dv_Ns"] += nose_mass * float(vn[-1] - vn[0])
+        out["momentum_x_fuselage"] = {"impulse_Ns": trap(sig["fuselage_force_x"].data),
+                                      "m_dv_Ns": spec_mass * float(vx[-1] - vx[0])}
     # planar-motion oracles over the primary impact
     n = int(np.searchsorted(t, t_contact + PLANAR_WINDOW))
     win = {k: Signal(v.name, v.t[:n], v.data[:n], v.unit, v.cfc, v.meta) for k, v in sig.items()}
@@ -131,7 +139,7 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
     t0 = time.perf_counter()
     path = rn.run_scenario(scen, out_dir, progress=False)
     wall = time.perf_counter() - t0
-    from crashdem.glider import glider_spec
+    from crashdem.glider import coupled_specs
 
     with open_result(path) as res:
         sig = res.signals(filtered=False)
@@ -141,10 +149,13 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
             run_info = dict(f["run"].attrs)
     t_contact = float(run_info["t_contact"])
     feats = crash_features(sig, t_contact, cfc=scen["instrumentation.cfc"])
-    spec = glider_spec(scen)
+    # the coupled fuselage: the whole body, or its rear part with the crushable nose (whose
+    # element load is then part of the recorded fuselage force)
+    _, spec, nose_spec = coupled_specs(scen)
     mounts = {m.name: m.position for m in spec.sensors}
     ch = checks(sig, spec.mass, mounts, feats["t_first_contact_s"],
-                scen["instrumentation.accel_full_scale_g"])
+                scen["instrumentation.accel_full_scale_g"],
+                None if nose_spec is None else nose_spec.mass)
     walls = {}
     for name in ("rear_wall", "left_wall", "right_wall"):
         walls[name] = {"max_force_N": float(np.max(sig[f"{name}_force"].data)),
@@ -154,6 +165,23 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
     walls["nose_on_rear_wall"] = {
         "max_force_N": float(np.max(nose.data)),
         "t_first_s": float(nose.t[on[0]] - feats["t_first_contact_s"]) if on.size else None}
+    if nose_spec is not None:
+        load = sig["nose_crush_load"].data
+        stroke = sig["nose_crush_stroke"].data
+        limit = scen["physics.structural_crush.stroke"]
+        # before the first sample whose compression reaches the stroke the element cannot
+        # have bottomed (compression >= plastic stroke): its load is capped at crush_force
+        n_b = int(np.argmax(stroke >= limit)) if np.any(stroke >= limit) else stroke.size
+        walls["nose_crush"] = {
+            "crush_force_N": scen["physics.structural_crush.crush_force"],
+            "stroke_limit_m": limit,
+            "max_load_N": float(np.max(load)),
+            "max_load_before_bottoming_N": float(np.max(load[:n_b])) if n_b else 0.0,
+            "t_bottoming_s": (float(sig["nose_crush_stroke"].t[n_b] - feats["t_first_contact_s"])
+                              if n_b < stroke.size else None),
+            "max_stroke_m": float(np.max(stroke)),
+            "energy_J": float(np.sum(0.5 * np.diff(stroke) * (load[1:] + load[:-1]))),
+            "nose_mass_kg": float(nose_spec.mass)}
     return {"features": feats, "checks": ch, "walls": walls, "wall_s": wall, "hdf5": str(path),
             "particles": int(run_info["particles"]), "dt": float(run_info["dt"]),
             "dem_steps": int(run_info["dem_steps"])}

@@ -144,6 +144,7 @@ def calibrate(base: dict, out_dir: Path, cache: Path = st.DEFAULT_CACHE, n_desig
                             "max_penetration_m", "t_rebound_s", "peak_decel_g", "double_peak")}
                             for k in series},
                         "wall_s": time.perf_counter() - t0})
+        (Path(out_dir) / "calibration_history.json").write_text(json.dumps(history, indent=1))
         log(f"  eval {len(history):2d}: J = {j:8.3f}  " + ", ".join(
             f"{p.key.split('.')[-1]}={values[p.key]:.4g}" for p in PARAMS))
         return j
@@ -157,7 +158,10 @@ def calibrate(base: dict, out_dir: Path, cache: Path = st.DEFAULT_CACHE, n_desig
         design = qmc.LatinHypercube(d=len(PARAMS), seed=seed).random(n_design)
         # the scenario-file values as one design point (the starting guess)
         s0 = sc.load(st.SPEEDS["19.0"])
-        u0 = np.array([p.to_unit(min(max(float(s0[p.key]), p.lo), p.hi)) for p in PARAMS])
+        # a key the scenario leaves unset (e.g. lower_porosity when the scenario sets the
+        # layer by its deposition friction instead) starts at the middle of its range
+        u0 = np.array([0.5 if s0[p.key] is None else p.to_unit(min(max(float(s0[p.key]), p.lo),
+                                                                    p.hi)) for p in PARAMS])
         design = np.vstack([u0, design])
     scores = [evaluate(u) for u in design]
     best_u = design[int(np.argmin(scores))]

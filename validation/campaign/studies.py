@@ -104,23 +104,54 @@ def relative_change(a: float, b: float) -> float:
 
 
 def domain_study(base: dict, out_dir: Path, cache: Path = DEFAULT_CACHE, label: str = "19.0",
-                 log=print) -> dict:
-    """Peak force with the tank diameter D and 2 D (issue: the change must be < 5 %)."""
+                 seeds=(1, 2, 3), log=print) -> dict:
+    """Peak force with the tank diameter D and 2 D (issue: the change must be < 5 %).
+
+    One packing is one random realisation: at 4,000 grains the peak force of a single impact
+    varies by several per cent from one packing seed to the next, as much as the effect being
+    measured.  Each diameter therefore runs with every seed of ``seeds`` (``scenario.seed`` is
+    the packing seed) and the *means* are compared; the seed-to-seed standard deviation and the
+    standard error of the change are reported with it, so the reader sees whether the change is
+    resolved.  ``passes_5pct``: the mean change is below 5 %.
+    """
     from crashdem import scenario as sc
 
     scen = load_scenario(label, base)
     d0 = scen["container.diameter"]
     rows = []
     for k, d in enumerate((d0, min(2.0 * d0, sc.SCHEMA["container"]["diameter"].hi))):
-        r = run_case(scen.with_overrides({"container.diameter": d}), out_dir / f"domain_{k}",
-                     cache)
-        rows.append({"diameter_m": d, "peak_force_N": r["peak_force_N"],
-                     "max_penetration_m": r["max_penetration_m"], "t_rebound_s": r["t_rebound_s"],
-                     "particles": r["particles"], "wall_s": r["wall_s"]})
-        log(f"  domain D = {d:.2f} m: peak {r['peak_force_N'] / 1e3:.1f} kN, "
-            f"penetration {r['max_penetration_m']:.3f} m, {r['particles']} grains")
-    ch = relative_change(rows[0]["peak_force_N"], rows[1]["peak_force_N"])
-    return {"rows": rows, "peak_force_change": ch, "passes_5pct": bool(ch < 0.05)}
+        for seed in seeds:
+            r = run_case(scen.with_overrides({"container.diameter": d, "scenario.seed": seed}),
+                         out_dir / f"domain_{k}_s{seed}", cache)
+            rows.append({"diameter_m": d, "seed": seed, "peak_force_N": r["peak_force_N"],
+                         "max_penetration_m": r["max_penetration_m"],
+                         "t_rebound_s": r["t_rebound_s"], "particles": r["particles"],
+                         "wall_s": r["wall_s"]})
+            log(f"  domain D = {d:.2f} m, seed {seed}: peak {r['peak_force_N'] / 1e3:.1f} kN, "
+                f"penetration {r['max_penetration_m']:.3f} m, {r['particles']} grains")
+    out: dict = {"rows": rows, "seeds": list(seeds)}
+    stats = []
+    for d in sorted({row["diameter_m"] for row in rows}):
+        pk = np.array([row["peak_force_N"] for row in rows if row["diameter_m"] == d])
+        pen = np.array([row["max_penetration_m"] for row in rows if row["diameter_m"] == d])
+        sd = float(pk.std(ddof=1)) if len(pk) > 1 else float("nan")
+        stats.append({"diameter_m": d, "peak_force_mean_N": float(pk.mean()),
+                      "peak_force_std_N": sd, "penetration_mean_m": float(pen.mean()),
+                      "penetration_std_m": float(pen.std(ddof=1)) if len(pen) > 1 else float("nan"),
+                      "n": int(len(pk))})
+    a, b = stats[0], stats[1]
+    ch = relative_change(a["peak_force_mean_N"], b["peak_force_mean_N"])
+    se = math.sqrt(a["peak_force_std_N"] ** 2 / a["n"] + b["peak_force_std_N"] ** 2 / b["n"]) / \
+        a["peak_force_mean_N"] if a["n"] > 1 and b["n"] > 1 else float("nan")
+    out.update({
+        "stats": stats,
+        "peak_force_change": ch,
+        "peak_force_change_stderr": se,
+        "seed_scatter": a["peak_force_std_N"] / a["peak_force_mean_N"],
+        "penetration_change": relative_change(a["penetration_mean_m"], b["penetration_mean_m"]),
+        "passes_5pct": bool(ch < 0.05),
+    })
+    return out
 
 
 def grain_study(base: dict, radii, out_dir: Path, cache: Path = DEFAULT_CACHE,
