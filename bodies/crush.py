@@ -219,6 +219,10 @@ class ExudynCrushableBody:
         self._sc = exu.SystemContainer()
         mbs = self._sc.AddSystem()
         rj = rot @ self.joint
+        # reference configuration of the nodes (the rear body's; the nose's follows from it):
+        # an exact restart rebuilds the same one (``load_state_dict``)
+        self._ref_position = pos.copy()
+        self._ref_rotation = rot.copy()
         bodies = []
         for spec, p, v in ((self.spec, pos, vel),
                            (self.nose_spec, pos + rj, vel + np.cross(omega, rj)
@@ -442,13 +446,94 @@ class ExudynCrushableBody:
             out += 0.5 * spec.mass * float(v @ v) + 0.5 * float(w @ (jw @ w))
         return out
 
+    #: scalar state of the crush element and the solver (saved and restored as is)
+    _SCALARS = ("s_p", "max_load_before_bottoming", "max_uf_load_before_bottoming",
+                "compression", "load", "bottomed", "_time", "_exu_time", "n_advances")
+
     def state_dict(self) -> dict:
-        raise NotImplementedError("ExudynCrushableBody: restart (state_dict) is not "
-                                  "implemented; the glider crash refuses checkpoints")
+        """Restart state: the exact Exudyn state of both bodies (reference configuration,
+        ODE2 coordinates and velocities, solver clock), the crush element's committed plastic
+        stroke and its history (load, compression, maxima, bottoming), the held loads on both
+        bodies and the declared connector load, plus the rear body's pose and velocities
+        (world, SI) for inspection. :meth:`load_state_dict` restores it bit for bit."""
+        sd = self._mbs.systemData
+        d = {"position": self.position(), "rotation": self.rotation(),
+             "velocity": self.velocity(), "angular_velocity": self.angular_velocity(),
+             "time": self._time, "force": self._force.copy(), "torque": self._torque.copy(),
+             "nose_force": self._nose_force.copy(), "nose_torque": self._nose_torque.copy(),
+             "added_force": self._added[0].copy(), "added_torque": self._added[1].copy(),
+             "reference_position": self._ref_position.copy(),
+             "reference_rotation": self._ref_rotation.copy(),
+             "ode2": np.array(sd.GetODE2Coordinates(), dtype=np.float64),
+             "ode2_t": np.array(sd.GetODE2Coordinates_t(), dtype=np.float64),
+             # the load vectors Exudyn holds (rear: applied minus declared connector load at
+             # the last apply; nose), restored as they are
+             "exudyn_loads": np.array([self._mbs.GetLoadParameter(ld, "loadVector")
+                                       for pair in self._loads for ld in pair],
+                                      dtype=np.float64),
+             # the element's parameters, checked on load (a restart into another element)
+             "crush_force": self.crush_force, "stroke": self.stroke, "k": self.k}
+        for name in self._SCALARS:
+            d[name] = getattr(self, name)
+        d["bottomed"] = bool(self.bottomed)
+        d["n_advances"] = int(self.n_advances)
+        return d
 
     def load_state_dict(self, d: dict) -> None:
-        raise NotImplementedError("ExudynCrushableBody: restart (load_state_dict) is not "
-                                  "implemented; the glider crash refuses checkpoints")
+        """Rebuild both bodies at a saved state (see :meth:`state_dict`), bit-exact.
+
+        Notes
+        -----
+        As ``ExudynRigidBody.load_state_dict``: the system is rebuilt on the saved reference
+        configuration, the ODE2 coordinates and velocities are set as the initial
+        configuration and a fresh explicit solver is initialised at the saved Exudyn clock
+        (an initialised solver does not see a changed current configuration).
+
+        Raises
+        ------
+        ValueError
+            If the dict belongs to an element with another crush force, stroke or stiffness
+            (another scenario or time step), or its coordinate vectors have the wrong size.
+        """
+        for name in ("crush_force", "stroke", "k"):
+            if float(d[name]) != getattr(self, name):
+                raise ValueError(f"ExudynCrushableBody.load_state_dict: {name}={d[name]!r} "
+                                 f"differs from this element's {getattr(self, name)!r}")
+        self.reset(d["reference_position"], d["reference_rotation"], (0.0, 0.0, 0.0),
+                   (0.0, 0.0, 0.0), float(d["time"]))
+        sd = self._mbs.systemData
+        q = np.asarray(d["ode2"], dtype=np.float64)
+        q_t = np.asarray(d["ode2_t"], dtype=np.float64)
+        n = len(sd.GetODE2Coordinates())
+        if q.shape != (n,) or q_t.shape != (n,):
+            raise ValueError(f"ExudynCrushableBody.load_state_dict: ode2 shape {q.shape} / "
+                             f"ode2_t shape {q_t.shape}: must be ({n},)")
+        self._solver.FinalizeSolver(self._mbs, self._ss)
+        self._solver = None
+        sd.SetODE2Coordinates(q.tolist(), configuration=exu.ConfigurationType.Initial)
+        sd.SetODE2Coordinates_t(q_t.tolist(), configuration=exu.ConfigurationType.Initial)
+        for name in self._SCALARS:
+            setattr(self, name, d[name])
+        self.s_p = float(d["s_p"])
+        self.bottomed = bool(d["bottomed"])
+        self.n_advances = int(d["n_advances"])
+        self._time = float(d["time"])
+        self._exu_time = float(d["_exu_time"])
+        self._ss.timeIntegration.startTime = self._exu_time
+        self._solver = exu.MainSolverExplicit()
+        self._solver.InitializeSolver(self._mbs, self._ss)
+        self._force = _vec3(d["force"], "force")
+        self._torque = _vec3(d["torque"], "torque")
+        self._nose_force = _vec3(d["nose_force"], "nose_force")
+        self._nose_torque = _vec3(d["nose_torque"], "nose_torque")
+        self._added = (_vec3(d["added_force"], "added_force"),
+                       _vec3(d["added_torque"], "added_torque"))
+        loads = np.asarray(d["exudyn_loads"], dtype=np.float64)
+        if loads.shape != (4, 3):
+            raise ValueError(f"ExudynCrushableBody.load_state_dict: exudyn_loads shape "
+                             f"{loads.shape}: must be (4, 3)")
+        for ld, vec in zip((ld for pair in self._loads for ld in pair), loads):
+            self._mbs.SetLoadParameter(ld, "loadVector", vec.tolist())
 
     def __del__(self):
         try:

@@ -126,6 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="confirm the top hypotheses with this many full DEM runs at most "
                         "(in parallel on Dask: a LocalCluster, or --scheduler; --workers 0 "
                         "runs them in this process)")
+    d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
+                   help="baseline simulation: the scenario's full result, run now when missing "
+                        "(run, default); the existing result only (result); the reduced-order "
+                        "model only (rom, fast, no anchor)")
     ensemble.add_cluster_arguments(d, set_option=False)
     d.set_defaults(func=_cmd_diagnose)
 

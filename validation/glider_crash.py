@@ -11,15 +11,17 @@ Varriale (2019) §2.2.4 and checks the physics of the record:
     integral = exact pitch (planar motion), free-flight pitch rate = release rate (0), front
     accelerometers clipped at 250 g.
 
-Sensitivity studies (``--studies``, coarse grains): compaction direction (horizontal layers vs
-layers normal to the slope, thesis §2.4), container size (the ideal 4.8 m vs the real one),
-particle size.
+Sensitivity studies (``--studies``, 0.1 m grains whatever the mode): compaction direction
+(horizontal layers vs layers normal to the slope, thesis §2.4), container size (the ideal 4.8 m
+vs the real one, width kept), particle size (0.1 vs 0.08 m), and the pitch-up diagnosis: pitch
+inertia 2x / 4x the build-up's (the whole aircraft's, thesis Tab. 2.3), crushable nose with
+and without it. One change at a time from the small baseline (docs/glider.md).
 
 Usage::
 
     python validation/glider_crash.py --small       # test-suite size (~800 grains, < 2 min)
     python validation/glider_crash.py               # default resolution
-    python validation/glider_crash.py --studies     # + sensitivity studies
+    python validation/glider_crash.py --small --studies   # + sensitivity studies
     python validation/glider_crash.py --set physics.structural_crush.enabled=true  # crushable nose
 
 The soil card ``validation/soil_cards/calibrated_gravel.toml`` is used when it exists (unless
@@ -61,8 +63,9 @@ REFERENCE = {"peak_ax_g": 20.0, "pitch_max_deg": 1.6, "duration_s": 0.25}
 #: real container's for CPU reasons (see docs/glider.md)
 IDEAL = {"container.length": 4.8, "container.height": 4.8, "container.soil_depth": 4.8,
          "physics.soil_layering.depth": 3.8}
-#: Grain sizes of the particle-size study [m] (coarse to the default resolution)
-GRAIN_RADII = (0.1, 0.08, 0.06)
+#: Grain radii of the particle-size study [m] (0.06 m needs a 12+ min deposition per packing
+#: on the shared 2-core machine: the default run gives that point)
+GRAIN_RADII = (0.1, 0.08)
 COARSE = {"soil.radius": 0.1, "soil.radius_spread": 0.1, "output.snapshots": 0,
           "output.plots": False}
 
@@ -136,9 +139,20 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
     from crashdem.results import open_result
 
     scen = sc.load(SCENARIO, {"scenario.name": f"glider_{tag}", **overrides})
+    # the slope packing: from the shared cache when it holds it, and into it when deposited here
+    import shutil
+
+    pk_name = f"packing-{rn.packing_spec(scen).hash()[:20]}.h5"
+    local = Path(out_dir) / "packings"
+    local.mkdir(parents=True, exist_ok=True)
+    if (Path(cache) / pk_name).exists() and not (local / pk_name).exists():
+        shutil.copy(Path(cache) / pk_name, local / pk_name)
     t0 = time.perf_counter()
     path = rn.run_scenario(scen, out_dir, progress=False)
     wall = time.perf_counter() - t0
+    if (local / pk_name).exists() and not (Path(cache) / pk_name).exists():
+        Path(cache).mkdir(parents=True, exist_ok=True)
+        shutil.copy(local / pk_name, Path(cache) / pk_name)
     from crashdem.glider import coupled_specs
 
     with open_result(path) as res:
@@ -182,7 +196,24 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
             "max_stroke_m": float(np.max(stroke)),
             "energy_J": float(np.sum(0.5 * np.diff(stroke) * (load[1:] + load[:-1]))),
             "nose_mass_kg": float(nose_spec.mass)}
+    # pitch-up diagnosis: peak gyro rate, pitch rate and vertical / longitudinal contact impulse
+    # over the first 20 ms after the first contact (raw channels)
+    tq, q = sig["pitch_rate"].t, sig["pitch_rate"].data
+    t1 = feats["t_first_contact_s"]
+    w20 = (tq >= t1) & (tq <= t1 + 0.02)
+    tc, fz, fx = sig["contact_force_z"].t, sig["contact_force_z"].data, \
+        sig["contact_force_x"].data
+    c20 = (tc >= t1) & (tc <= t1 + 0.02)
+
+    def _imp(y, m):
+        return float(np.sum(0.5 * np.diff(tc[m]) * (y[m][1:] + y[m][:-1])))
+
+    diag = {"pitch_rate_max_deg_s": float(np.degrees(np.nanmax(q))),
+            "pitch_rate_at_20ms_deg_s": float(np.degrees(q[w20][-1])) if w20.any() else None,
+            "impulse_z_20ms_Ns": _imp(fz, c20), "impulse_x_20ms_Ns": _imp(fx, c20),
+            "pitch_inertia_kg_m2": float(spec.inertia[1, 1])}
     return {"features": feats, "checks": ch, "walls": walls, "wall_s": wall, "hdf5": str(path),
+            "diagnosis": diag,
             "particles": int(run_info["particles"]), "dt": float(run_info["dt"]),
             "dem_steps": int(run_info["dem_steps"])}
 
@@ -193,34 +224,78 @@ def _errors(feats: dict) -> dict:
             for k, ref in REFERENCE.items()}
 
 
-def studies(base: dict, out: Path, cache: Path) -> dict:
-    """The three sensitivity studies at coarse resolution (returns features per case)."""
-    rep: dict = {}
+#: Pitch inertia of the build-up (``bodies.glider_fuselage``, components within 3 m) [kg m^2]
+#: and the factors of the pitch-inertia study: the thesis's ballast restored the WHOLE
+#: aircraft's pitch inertia (wings and tail included; Tab. 2.3 values missing from the text)
+PITCH_INERTIA_BUILD_UP = 230.0
+PITCH_INERTIA_FACTORS = (2.0, 4.0)
+#: Crushable nose (``physics.structural_crush``, schema defaults: 50 kN, 0.2 m)
+CRUSH = {"physics.structural_crush.enabled": True}
 
-    def feat(r):
-        f = r["features"]
-        return {k: f[k] for k in ("peak_ax_g", "second_peak_ax_g", "t_peaks_s", "pitch_min_deg",
-                                  "pitch_max_deg", "duration_s")} | {
-            "particles": r["particles"], "wall_s": r["wall_s"],
-            "nose_on_rear_wall_N": r["walls"]["nose_on_rear_wall"]["max_force_N"],
-            "rear_wall_max_deflection_m": r["walls"]["rear_wall"]["max_deflection_m"]}
 
-    for comp in ("horizontal", "slope_normal"):
-        r = run_one({**base, **COARSE, "container.compaction": comp}, out, cache,
-                    f"compaction_{comp}")
-        rep.setdefault("compaction", {})[comp] = feat(r)
-        print(f"  compaction {comp}: {rep['compaction'][comp]}", flush=True)
-    for label, ov in (("real", {}), ("ideal_4.8m", IDEAL)):
-        r = run_one({**base, **COARSE, **ov}, out, cache, f"size_{label}")
-        rep.setdefault("container_size", {})[label] = feat(r)
-        print(f"  container {label}: {rep['container_size'][label]}", flush=True)
+def study_cases() -> list[tuple[str, str, dict]]:
+    """The sensitivity cases (study, label, overrides on the small baseline), cheapest first
+    (cases on the baseline's packing, then the ones needing a new deposition)."""
+    cases: list[tuple[str, str, dict]] = []
+    for f in PITCH_INERTIA_FACTORS:
+        cases.append(("pitch_inertia", f"{f:g}x",
+                      {"glider.pitch_inertia": f * PITCH_INERTIA_BUILD_UP}))
+    cases.append(("crushable_nose", "on", dict(CRUSH)))
+    f = PITCH_INERTIA_FACTORS[-1]
+    cases.append(("crushable_nose", f"on_pitch_inertia_{f:g}x",
+                  {**CRUSH, "glider.pitch_inertia": f * PITCH_INERTIA_BUILD_UP}))
+    cases.append(("compaction", "slope_normal", {"container.compaction": "slope_normal"}))
     for rad in GRAIN_RADII:
-        ov = {**base, "soil.radius": rad, "output.snapshots": 0, "output.plots": False}
-        if rad == 0.1:
-            ov["soil.radius_spread"] = 0.1
-        r = run_one(ov, out, cache, f"grain_{rad:g}")
-        rep.setdefault("particle_size", {})[f"{rad:g}"] = feat(r)
-        print(f"  grain radius {rad:g} m: {rep['particle_size'][f'{rad:g}']}", flush=True)
+        if rad != COARSE["soil.radius"]:
+            cases.append(("particle_size", f"{rad:g}", {"soil.radius": rad}))
+    cases.append(("container_size", "ideal_4.8m", dict(IDEAL)))
+    return cases
+
+
+#: Baseline label of each study (the small run: real container, horizontal layers, 0.1 m
+#: grains, rigid fuselage, build-up pitch inertia)
+BASELINE_LABEL = {"pitch_inertia": "1x", "crushable_nose": "off", "compaction": "horizontal",
+                  "particle_size": "0.1", "container_size": "real"}
+
+
+def _study_features(r: dict) -> dict:
+    f = r["features"]
+    out = {k: f[k] for k in ("peak_ax_g", "second_peak_ax_g", "t_peaks_s", "pitch_min_deg",
+                             "pitch_max_deg", "duration_s")}
+    out["errors"] = {k: e["relative"] for k, e in _errors(f).items()}
+    out.update(particles=r["particles"], wall_s=r["wall_s"],
+               nose_on_rear_wall_N=r["walls"]["nose_on_rear_wall"]["max_force_N"],
+               rear_wall_max_force_N=r["walls"]["rear_wall"]["max_force_N"],
+               rear_wall_max_deflection_m=r["walls"]["rear_wall"]["max_deflection_m"],
+               **r.get("diagnosis", {}))
+    mom = r["checks"]["momentum_x"]  # the physics oracle of every case: int F_x dt = m dv_x
+    out["momentum_x_rel_error"] = abs(mom["impulse_Ns"] - mom["m_dv_Ns"]) / abs(mom["m_dv_Ns"])
+    if "nose_crush" in r["walls"]:
+        nc = r["walls"]["nose_crush"]
+        out["nose_crush"] = {k: nc[k] for k in ("max_stroke_m", "t_bottoming_s", "energy_J")}
+    return out
+
+
+def studies(base: dict, out: Path, cache: Path, baseline: dict | None = None,
+            only: set[str] | None = None) -> dict:
+    """The sensitivity studies at the small resolution (0.1 m grains): pitch inertia (2x, 4x
+    the build-up's), crushable nose (with and without the larger inertia), compaction
+    direction, particle size, container size. ``baseline`` = the small run's ``run_one``
+    result (run here when None). Returns features per study and case; the baseline appears in
+    every study under ``BASELINE_LABEL``."""
+    rep: dict = {}
+    base = {**base, **COARSE}
+    out.mkdir(parents=True, exist_ok=True)
+    if baseline is None:
+        baseline = run_one(base, out, cache, "baseline")
+    b = _study_features(baseline)
+    for study, label, ov in study_cases():
+        if only is not None and study not in only:
+            continue
+        rep.setdefault(study, {BASELINE_LABEL[study]: b})
+        r = run_one({**base, **ov}, out, cache, f"{study}_{label}".replace(".", "p"))
+        rep[study][label] = _study_features(r)
+        print(f"  {study} {label}: {json.dumps(_clean(rep[study][label]))}", flush=True)
     return rep
 
 
@@ -240,6 +315,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--small", action="store_true", help="reduced resolution (test suite)")
     ap.add_argument("--studies", action="store_true", help="run the sensitivity studies")
+    ap.add_argument("--study", action="append", default=[],
+                    choices=sorted(BASELINE_LABEL),
+                    help="with --studies: run only this study (repeatable)")
     ap.add_argument("--no-card", action="store_true", help="ignore the calibrated soil card")
     ap.add_argument("--out", type=Path, default=Path("runs/glider_crash"))
     ap.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="packing cache")
@@ -279,9 +357,11 @@ def main(argv=None) -> int:
                   hdf5=r["hdf5"], checks=r["checks"], errors=_errors(f), walls=r["walls"],
                   t_first_contact_s=f["t_first_contact_s"])
     if args.studies:
-        print("sensitivity studies (coarse grains):", flush=True)
+        print("sensitivity studies (small resolution, 0.1 m grains):", flush=True)
         base_s = {k: v for k, v in base.items() if not k.startswith("output.")}
-        report["studies"] = studies(base_s, out / "studies", args.cache)
+        report["studies"] = studies(base_s, out / "studies", args.cache,
+                                    baseline=r if mode == "small" else None,
+                                    only=set(args.study) if args.study else None)
     report["wall_s"] = time.perf_counter() - t0
     print(json.dumps(_clean(report)))
     return 0

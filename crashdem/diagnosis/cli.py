@@ -5,7 +5,10 @@ holding the diagnosed channels; the ROM is then first calibrated to it), else th
 reduced-order model (``rom_from_scenario``); the screening fits
 every catalogue hypothesis to the recording and writes ``DIR/report.json``, ``DIR/report.md``
 and overlay PNGs. With ``--full-confirm N`` the top hypotheses are re-run with the full DEM
-(``crashdem.run.run_scenario`` with the hypothesis's ``physics.*`` overrides; at most N+1 runs).
+(``crashdem.run.run_scenario`` with the hypothesis's ``physics.*`` overrides; at most N+1 runs),
+in parallel on Dask (``crashdem.diagnosis.distributed``: a LocalCluster of ``--workers``
+processes, or the cluster at ``--scheduler ADDRESS``; runs gathered in ``DIR/confirmation.h5``);
+``--workers 0`` runs them one after the other in this process.
 
 A recorded channel is matched to a ROM channel (``accel_z``: specific force along +z of the
 impactor [m/s^2]; ``velocity_z`` [m/s]) by name, or explicitly with ``NAME:accel_z``.
@@ -113,7 +116,9 @@ def diagnose_command(args: argparse.Namespace) -> int:
     settings = RomSettings(t_pre=max(0.0, -float(first.t[0])) + 0.005,
                            t_end=float(first.t[-1]) + 0.01, sample_rate=first.fs,
                            cfc=first.cfc if first.cfc is not None else scen.get("instrumentation.cfc"))
-    baseline, source = _baseline(scen, cmap, base_params, settings)
+    baseline, source = _baseline(scen, cmap, base_params, settings,
+                                 mode=getattr(args, "baseline", None) or "run",
+                                 out_dir=Path(args.out))
     n_full = getattr(args, "full_confirm", None)
     if n_full:
         from crashdem.recordings import read_recording as _read
@@ -127,8 +132,14 @@ def diagnose_command(args: argparse.Namespace) -> int:
             res = _read(path)
             return {cmap_name: res[name] for name, cmap_name in cmap.items() if name in res}
 
+        if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
+            from crashdem.diagnosis.distributed import full_simulator_from_args
+
+            full = full_simulator_from_args(args, scen, cmap)  # type: ignore[assignment]
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom")
+        if hasattr(full, "describe"):
+            rep.simulations["confirmation"] = full.describe()
     else:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom")
     rep.simulations["baseline_source"] = source
@@ -140,23 +151,63 @@ def diagnose_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSettings
-              ) -> tuple[dict[str, Signal], str]:
-    """The scenario's own full result (``crashdem.run.default_output``) when it exists and holds
-    the diagnosed channels, else the scenario's ROM."""
-    try:
-        from crashdem.recordings import read_recording
-        from crashdem.run import default_output
+#: simulation channel that stands for each model channel when the recording's names differ
+SIM_CHANNELS = {ACCEL: "drop_mass_accel_z", VELOCITY: "drop_mass_velocity_z"}
 
-        path = default_output(scen, None)
-        if path.exists():
-            res = read_recording(path)
-            if all(name in res for name in cmap):
-                return ({rom_name: res[name] for name, rom_name in cmap.items()},
-                        f"full result {path}")
-    except (ImportError, ValueError, OSError):
-        pass
-    return simulate(rom_params, settings), "rom"
+
+def _pick(res, name: str, rom_name: str):
+    """The simulated channel for a recorded ``name`` (same name first, then the impactor's
+    channel standing for ``rom_name``), or None."""
+    if name in res:
+        return res[name]
+    alt = SIM_CHANNELS.get(rom_name)
+    return res[alt] if alt is not None and alt in res else None
+
+
+def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSettings,
+              mode: str = "run", out_dir: Path | None = None
+              ) -> tuple[dict[str, Signal], str]:
+    """The baseline simulation the recording is compared with.
+
+    ``mode``:
+      * ``"run"`` (default): the scenario's full result (``crashdem.run.default_output``) when
+        it exists and holds the diagnosed channels, else the scenario is run now with the full
+        coupled DEM (one simulation, written under ``out_dir/baseline``). The screening model is
+        then calibrated to it and anchored on it, which is what makes the screening valid for
+        recordings made by another code;
+      * ``"result"``: the existing full result only (error when missing);
+      * ``"rom"``: the scenario's reduced-order model (fast; no anchor, so model-form
+        differences of another code are not separated from missing physics).
+    """
+    if mode not in ("run", "result", "rom"):
+        raise ValueError(f"--baseline={mode!r}: must be one of 'run', 'result', 'rom'")
+    if mode == "rom":
+        return simulate(rom_params, settings), "rom"
+    from crashdem.recordings import read_recording
+    from crashdem.run import default_output, run_scenario
+
+    def channels(path):
+        res = read_recording(path)
+        got = {rom_name: _pick(res, name, rom_name) for name, rom_name in cmap.items()}
+        return got if all(v is not None for v in got.values()) else None
+
+    path = default_output(scen, None)
+    if path.exists():
+        got = channels(path)
+        if got is not None:
+            return got, f"full result {path}"
+    if mode == "result":
+        raise ValueError(f"--baseline=result: no full result of the scenario with the diagnosed "
+                         f"channels at {path}; run `crashdem run` first or use --baseline run")
+    out = Path(out_dir if out_dir is not None else ".") / "baseline"
+    path = run_scenario(scen.with_overrides({"output.snapshots": 0}), out_dir=out,
+                        progress=False, plots=False)
+    got = channels(path)
+    if got is None:
+        raise ValueError(f"diagnose: the baseline run {path} has none of the diagnosed channels "
+                         f"{sorted(cmap)} (nor {sorted(SIM_CHANNELS.values())}); map them with "
+                         "--channel NAME:accel_z")
+    return got, f"full run {path}"
 
 
 def _apply_scales(scen, scales: dict[str, float]) -> dict[str, Any]:

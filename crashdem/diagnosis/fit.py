@@ -154,14 +154,29 @@ class FitProblem:
     t0: float = 0.0  # start of the event window [s]
     calls: int = 0
     score_window: tuple[float, float] | None = None  # default: event_window of channel 0
+    #: model-error floor per channel: (sigma [channel unit], correlation length [s]); the
+    #: residual weight is 1 / sqrt(sigma_noise^2 + sigma_model^2) and the independent samples
+    #: are counted with the variance-weighted correlation length (see ``diagnose``)
+    model_error: dict[str, tuple[float, float]] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         self.masks = {}
+        self.weights = {}
         n_eff = 0.0
         for ch in self.channels:
             rec = self.recording[ch]
             full = np.flatnonzero(rec.t >= self.t0)
-            n_eff += _dsp.effective_samples(full.size, rec.fs, rec.cfc)
+            n_noise = _dsp.effective_samples(full.size, rec.fs, rec.cfc)
+            sn = self.noise[ch].sigma
+            sm, tau_m = self.model_error.get(ch, (0.0, 0.0))
+            self.weights[ch] = 1.0 / math.sqrt(sn * sn + sm * sm)
+            if sm > 0.0 and tau_m > 0.0:
+                # independent samples of the total error: correlation lengths weighted by the
+                # variances of sensor noise and model error (Bendat & Piersol 8.2)
+                tau_n = full.size / max(n_noise, 1e-12) / rec.fs
+                tau = (sn * sn * tau_n + sm * sm * tau_m) / (sn * sn + sm * sm)
+                n_noise = min(n_noise, full.size / (tau * rec.fs))
+            n_eff += max(n_noise, 1.0)
             # residual samples: every stride-th sample, still >= SAMPLES_PER_BAND per noise
             # bandwidth (the dropped samples carry no independent information)
             band = _dsp.noise_bandwidth(rec.fs, rec.cfc)
@@ -186,7 +201,7 @@ class FitProblem:
         for ch in self.channels:
             rec = self.recording[ch]
             al = align(rec, sims[ch], shift)
-            parts.append(((al.data - rec.data) / self.noise[ch].sigma)[self.masks[ch]])
+            parts.append(((al.data - rec.data) * self.weights[ch])[self.masks[ch]])
         return np.concatenate(parts)
 
     def aligned(self, sims: Mapping[str, Signal], shift: float) -> dict[str, Signal]:

@@ -5,8 +5,8 @@ with numerics that differ from the diagnosing ROM -- explicit midpoint (RK2) ins
 semi-implicit Euler, a 4x smaller step (5 us), the mount resonance discretised with a
 first-order hold instead of Tustin, and an integrating (block-averaging) acquisition instead of
 point sampling -- then acquired like a lab channel: 12.5 kHz, white sensor noise, a trigger
-offset, SAE J211 CFC 60. The lead will add a full-DEM truth (other packing seed, particle size
-and time step) behind the same ``ConcealedCase`` type.
+offset, SAE J211 CFC 60. The full-DEM truth (other packing seed, particle size and time step)
+is ``generator_dem.dem_concealed_case``, acquired with :func:`acquire_samples`.
 
 Notes
 -----
@@ -25,7 +25,8 @@ from crashdem.diagnosis.rom import (ACCEL, VELOCITY, RomParams, RomSettings, run
                                     sample_grid)
 from crashdem.signal import Signal
 
-__all__ = ["ConcealedCase", "EFFECT_DRAWS", "TRUTH_DT", "acquire", "concealed_case", "draw_effect"]
+__all__ = ["ConcealedCase", "EFFECT_DRAWS", "TRUTH_DT", "acquire", "acquire_samples",
+           "concealed_case", "draw_effect"]
 
 #: truth integration step [s] (diagnosing ROM: 2e-5 s)
 TRUTH_DT = 5.0e-6
@@ -129,6 +130,56 @@ def acquire(truth: RomParams, rng: np.random.Generator, *, sample_rate: float = 
                            {"source": "crashdem.diagnosis.generator (truth: midpoint RK2, "
                                       f"dt={TRUTH_DT:g} s)"})
     del dep  # penetration is not a lab channel here (no displacement transducer)
+    return out
+
+
+def acquire_samples(t_raw: np.ndarray, channels: dict[str, tuple[np.ndarray, str]],
+                    v_first: float, rng: np.random.Generator, *, sample_rate: float = 12500.0,
+                    cfc: float = 60.0, t_pre: float = PRE_TRIGGER, t_end: float | None = None,
+                    trigger_offset: float = 0.0, noise: dict[str, float] | None = None,
+                    gravity: float = 9.81, source: str = "") -> dict[str, Signal]:
+    """Acquire finely sampled truth channels (any producer, e.g. a DEM run) like a lab.
+
+    Parameters
+    ----------
+    t_raw : truth time axis [s], t = 0 at first contact (strictly increasing)
+    channels : name -> (data, SI unit); ``accel_z`` (specific force: 0 in free fall) and
+        ``velocity_z`` (extended before ``t_raw[0]`` as a free fall) are understood
+    v_first : downward speed at ``t_raw[0]`` [m/s] (> 0), for the pre-trigger velocity
+    rng, sample_rate, cfc, t_pre, trigger_offset, noise : as for :func:`acquire`
+    t_end : end of the record [s] (default: the last truth sample)
+
+    Returns
+    -------
+    dict name -> Signal: integrating acquisition (mean over each sample interval), white noise,
+    SAE J211 CFC ``cfc``, time axis shifted by ``trigger_offset``.
+    """
+    noise = RAW_NOISE if noise is None else noise
+    t_raw = np.asarray(t_raw, float)
+    t_end = float(t_raw[-1]) if t_end is None else float(t_end)
+    dts = 1.0 / sample_rate
+    n0 = int(math.floor(t_pre * sample_rate))
+    ts = (np.arange(-n0, int(math.floor(t_end * sample_rate)) + 1)) * dts
+    out: dict[str, Signal] = {}
+    for name, (raw, unit) in channels.items():
+        raw = np.asarray(raw, float)
+        if raw.shape != t_raw.shape:
+            raise ValueError(f"channels[{name!r}]: {raw.shape} samples, t_raw has {t_raw.shape}")
+        data = np.empty_like(ts)
+        pre = ts <= t_raw[0] + dts
+        if name == VELOCITY:
+            data[pre] = -(v_first + gravity * (ts[pre] - t_raw[0]))
+        else:
+            data[pre] = 0.0
+        post = np.flatnonzero(~pre)
+        cum = np.concatenate([[0.0], np.cumsum(0.5 * (raw[1:] + raw[:-1]) * np.diff(t_raw))])
+        tb = ts[post]
+        ta = tb - dts
+        data[post] = (np.interp(tb, t_raw, cum) - np.interp(ta, t_raw, cum)) / dts
+        data = data + rng.normal(0.0, noise[name], size=data.shape)
+        data = _dsp.cfc(data, sample_rate, cfc)
+        out[name] = Signal(name, ts + trigger_offset, data, unit, cfc,
+                           {"source": source or "crashdem.diagnosis.generator.acquire_samples"})
     return out
 
 

@@ -1,8 +1,10 @@
 """Restart of the glider crash: a ``crashdem run`` of a small glider scenario killed with
 SIGKILL mid-run and resumed with ``crashdem run --resume`` is bit-identical to an
-uninterrupted run (issue 8). The glider keeps state outside the DEM and the coupling (the
-compliant wall panels and the fuselage-wall contact): the checkpoint carries it through the
-component protocol of ``crashdem.checkpoint``.
+uninterrupted run (issue 8), for the rigid fuselage and with the crushable nose
+(``physics.structural_crush``, issue 6: two Exudyn bodies and the crush element's plastic
+history). The glider keeps state outside the DEM and the coupling (the compliant wall panels,
+the fuselage-wall contacts, the crush exchange's value store): the checkpoint carries it
+through the component protocol of ``crashdem.checkpoint``.
 
 Oracle throughout: identity with the uninterrupted computation (same inputs, same thread
 count), compared with ``np.array_equal`` -- no tolerance, since the contract is bit-identity.
@@ -50,18 +52,25 @@ SMALL = {
 #: the process is killed at the first checkpoint at least this long after the start [s]: past
 #: the first contact (0.02 s), so that walls, contact and filters carry impact state
 KILL_AFTER_T = 0.03
+#: the variants: rigid fuselage, crushable nose (schema's 50 kN / 0.2 m element)
+VARIANTS = {"rigid": {}, "crush": {"physics.structural_crush.enabled": True}}
+#: components a killed checkpoint carries, per variant
+COMPONENTS = {"rigid": ["wall.left_wall", "wall.rear_wall", "wall.right_wall", "wall_contact"],
+              "crush": ["crush_store", "nose_wall_contact", "wall.left_wall", "wall.rear_wall",
+                        "wall.right_wall", "wall_contact"]}
 POLL_TIMEOUT = 120.0  # [s] generous bounds against a hung process on a shared 2-core machine
 RUN_TIMEOUT = 300.0
 POLL_INTERVAL = 0.005  # [s]
 
 
-def _cli(*args: str) -> list[str]:
+def _cli(*args: str, extra: dict | None = None) -> list[str]:
     cmd = [sys.executable, "-m", "crashdem.cli", "--log-level", "WARNING", "run", str(SCENARIO),
            "--quiet", "--no-plots"]
-    for k, v in SMALL.items():
+    for k, v in {**SMALL, **(extra or {})}.items():
         if k == "output.plots":
             continue
-        val = f'"{v}"' if isinstance(v, str) else repr(v)
+        val = (f'"{v}"' if isinstance(v, str) else str(v).lower() if isinstance(v, bool)
+               else repr(v))
         cmd += ["--set", f"{k}={val}"]
     return cmd + list(args)
 
@@ -91,9 +100,10 @@ def _assert_tree_equal(a, b, where: str) -> None:
         assert (a == b) or (a != a and b != b), (where, a, b)
 
 
-@pytest.fixture(scope="module")
-def glider_killed_and_resumed(tmp_path_factory):
-    scen = sc.load(SCENARIO, SMALL)
+@pytest.fixture(scope="module", params=list(VARIANTS))
+def glider_killed_and_resumed(request, tmp_path_factory):
+    variant = VARIANTS[request.param]
+    scen = sc.load(SCENARIO, {**SMALL, **variant})
     ref_dir = tmp_path_factory.mktemp("glider_uninterrupted")
     _seed_packing(scen, ref_dir)
     ref = run_scenario(scen, out_dir=ref_dir, progress=False)
@@ -102,7 +112,8 @@ def glider_killed_and_resumed(tmp_path_factory):
     shutil.copytree(ref_dir / "packings", out / "packings")
     ckpt = ck.checkpoint_path(out / "glider_restart.h5")
     env = dict(os.environ, PYTHONWARNINGS="error")
-    proc = subprocess.Popen(_cli("--out", str(out)), env=env, stdout=subprocess.PIPE,
+    proc = subprocess.Popen(_cli("--out", str(out), extra=variant), env=env,
+                            stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE)
     t0 = time.monotonic()
     while True:
@@ -125,12 +136,14 @@ def glider_killed_and_resumed(tmp_path_factory):
     killed = ck.read_checkpoint(ckpt)
     with open_result(out / "glider_restart.h5") as res:
         killed_status = res.status
-    done = subprocess.run(_cli("--out", str(out), "--resume"), env=env, capture_output=True,
+    done = subprocess.run(_cli("--out", str(out), "--resume", extra=variant), env=env,
+                          capture_output=True,
                           timeout=RUN_TIMEOUT)
     assert done.returncode == 0, done.stderr.decode()[-3000:]
     return {"ref": ref, "resumed": out / "glider_restart.h5", "killed_rc": proc.returncode,
             "killed": killed, "killed_status": killed_status,
-            "ref_ckpt": ck.checkpoint_path(ref), "resumed_ckpt": ckpt}
+            "ref_ckpt": ck.checkpoint_path(ref), "resumed_ckpt": ckpt,
+            "variant": request.param, "overrides": variant}
 
 
 def test_glider_kill_then_resume_is_bit_identical(glider_killed_and_resumed):
@@ -146,8 +159,12 @@ def test_glider_kill_then_resume_is_bit_identical(glider_killed_and_resumed):
     assert k["killed_status"] == "running" and not kc.complete
     assert KILL_AFTER_T <= kc.t < SMALL["solver.t_end"] + 0.02
     # the killed state carries wall and contact state that the restart must restore
-    assert sorted(kc.components) == ["wall.left_wall", "wall.rear_wall", "wall.right_wall",
-                                     "wall_contact"]
+    assert sorted(kc.components) == COMPONENTS[k["variant"]]
+    if k["variant"] == "crush":
+        # the crush element is mid-stroke at the kill: its plastic history must come back
+        crush = kc.cosim["model"]
+        assert crush["s_p"] > 0.0 and crush["load"] > 0.0
+        assert ck.MODEL_REF in kc.sensors.refs
     rear = kc.components["wall.rear_wall"]
     assert rear["u"] != 0.0 and rear["v"] != 0.0 and rear["t_last"] is not None
     assert isinstance(kc.sensors, ck.PickledSensors) and "wall.rear_wall" in kc.sensors.refs
@@ -159,6 +176,10 @@ def test_glider_kill_then_resume_is_bit_identical(glider_killed_and_resumed):
         for must in ("rear_accel_x", "pitch_rate", "rear_wall_force", "rear_wall_deflection",
                      "nose_rear_wall_force", "contact_force_x"):
             assert must in names, must
+        if k["variant"] == "crush":
+            for must in ("nose_crush_load", "nose_crush_stroke", "fuselage_force_x",
+                         "nose_velocity_x"):
+                assert must in names, must
         for name in names:
             for filtered in (False, True):
                 sa, sb = a.channel(name, filtered=filtered), b.channel(name, filtered=filtered)
@@ -190,7 +211,8 @@ def test_glider_checkpoints_do_not_change_the_results(glider_killed_and_resumed,
     contact and the sensors (and flushing the result at extra times) changes no channel and
     no ledger row."""
     shutil.copytree(glider_killed_and_resumed["ref"].parent / "packings", tmp_path / "packings")
-    scen = sc.load(SCENARIO, {**SMALL, "output.checkpoint_every_s": None})
+    scen = sc.load(SCENARIO, {**SMALL, **glider_killed_and_resumed["overrides"],
+                              "output.checkpoint_every_s": None})
     plain = run_scenario(scen, out_dir=tmp_path, progress=False)
     assert not ck.checkpoint_path(plain).exists()
     with open_result(glider_killed_and_resumed["ref"]) as a, open_result(plain) as b:

@@ -77,7 +77,7 @@ def test_cli_diagnose_end_to_end(tmp_path):
     scen.write_text(SCENARIO_TOML)
     out = tmp_path / "out"
     assert cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
-                     "--out", str(out)]) == 0
+                     "--out", str(out), "--baseline", "rom"]) == 0
     d = json.loads((out / "report.json").read_text())
     assert d["missing_physics"] == "structural_crush"
     assert d["simulations"]["baseline_source"] == "rom"

@@ -1,0 +1,321 @@
+"""Concealed-effect recordings whose truth is the full DEM (crashdem's own soil engine).
+
+The truth is the small-resolution sphere drop (``validation/scenarios/drop_s2_h13p70.toml``
+with the campaign's ``small`` overrides: ~500-1,000 grains of 0.10 m mean radius in a 2 m tank)
+run through ``crashdem.run.run_scenario`` with ONE ``physics.<effect>.*`` switch drawn from the
+seed, and with numerics that differ from the baseline in three ways that are *not* the effect:
+
+* another packing seed (``scenario.seed``: a different grain arrangement),
+* a mean particle radius 10-15 % larger or smaller (sign and size drawn from the seed),
+* another time step (``solver.safety`` 0.15-0.22 instead of 0.3 of the critical step).
+
+The truth channels are sampled at 50 kHz by the run's sensors, then acquired like a lab channel
+with :func:`crashdem.diagnosis.generator.acquire_samples`: integrating 12.5 kHz acquisition,
+0.5 g / 0.05 m/s white noise, an 80 ms pre-trigger free-fall segment, a trigger offset of
++-2 ms and SAE J211 CFC 60. The baseline is the same scenario without the effect at the baseline
+numerics (seed 1, radius 0.10 m, safety 0.3), its CFC 60 channels as the run writes them.
+
+Both are cached on disk (``$CRASHDEM_CACHE/diagnosis_truth`` or
+``~/.cache/crashdem/diagnosis_truth``) keyed by a hash of the scenario file, the overrides and
+the sources of the simulation code (``soil``, ``bodies``, ``coupling``, ``crashdem/run.py``,
+sensors, scenario, filters: a code change re-runs); packings are cached by ``soil.packing``
+under ``.../packings``.
+
+Which parameters are compared with the ROM's (``DemConcealedCase.values``)
+--------------------------------------------------------------------------
+Only quantities with the same physical meaning in the DEM scenario and in the ROM:
+``soil_layering.depth`` -> ``interface_depth`` [m], ``boundary_proximity.floor_depth`` ->
+``floor_depth`` [m], ``initial_conditions.velocity_offset`` -> ``speed_offset`` [m/s],
+``sensor_dynamics.natural_frequency`` -> ``mount_frequency`` [Hz]. Not compared (drawn values
+in ``DemConcealedCase.drawn``): the layering's ``lower_young_factor`` (a grain modulus ratio, the
+ROM's ``strength_ratio`` is a bulk resistance ratio that also contains the lower layer's
+compaction), the mount damping ratio (the run's sensor is a mass-spring low-pass
+``wn^2/(s^2+2 zeta wn s+wn^2)``, the ROM's a base-excitation transmissibility; the two dampings
+give the same resonance but differ in the transmitted high-frequency content), the contact
+cohesion strengths [Pa on r^2] (the ROM's cohesion is a bulk Mohr-Coulomb c with a bearing
+factor) and the contact restitution (the ROM's is a bulk soil-spring dashpot).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
+from crashdem.signal import Signal
+
+__all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS",
+           "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
+           "cache_dir"]
+
+#: the drop-test scenario of the truth and baseline
+SCENARIO = Path(__file__).resolve().parents[2] / "validation" / "scenarios" / "drop_s2_h13p70.toml"
+#: small resolution (validation/campaign/studies.py RESOLUTIONS["small"] + COMMON); the layering
+#: of the reference file is switched off: the baseline is a homogeneous bed
+BASE_OVERRIDES: dict[str, Any] = {
+    "soil.radius": 0.10, "soil.radius_spread": 0.10, "container.diameter": 2.0,
+    "solver.t_end": 0.12, "output.snapshots": 0, "output.plots": False,
+    "physics.soil_layering.enabled": False, "scenario.threads": 1,
+}
+#: numerics of the baseline simulation
+BASELINE_NUMERICS: dict[str, Any] = {"scenario.seed": 1, "soil.radius": 0.10, "solver.safety": 0.3}
+#: raw sampling of the truth run (the lab acquisition then integrates to 12.5 kHz)
+TRUTH_SAMPLE_RATE = 50000.0
+#: channels of the run -> diagnosis channel names
+CHANNELS = {"drop_mass_accel_z": "accel_z", "drop_mass_velocity_z": "velocity_z"}
+
+#: effect -> {scenario key under physics.<effect>: (low, high, "lin"|"log")}; magnitudes chosen so
+#: the effect is visible above the granular fluctuation of the small-resolution bed (a lab only
+#: diagnoses visible mismatches), not tuned to the method
+DEM_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
+    "soil_layering": {"depth": (0.25, 0.40, "lin"), "lower_young_factor": (4.0, 8.0, "log")},
+    "boundary_proximity": {"floor_depth": (0.75, 0.90, "lin")},
+    "initial_conditions": {"velocity_offset": (2.5, 4.0, "lin")},  # sign drawn separately
+    "sensor_dynamics": {"natural_frequency": (40.0, 90.0, "log"),
+                        "damping_ratio": (0.05, 0.15, "lin")},
+    "cohesion": {"normal_strength": (1.0e5, 3.0e5, "log")},  # shear_strength = normal_strength
+    "contact_damping": {"restitution": (0.1, 0.3, "lin")},
+}
+#: scenario key (under physics.<effect>) -> ROM parameter with the same physical meaning
+COMPARED: dict[str, dict[str, str]] = {
+    "soil_layering": {"depth": "interface_depth"},
+    "boundary_proximity": {"floor_depth": "floor_depth"},
+    "initial_conditions": {"velocity_offset": "speed_offset"},
+    "sensor_dynamics": {"natural_frequency": "mount_frequency"},
+    "cohesion": {},
+    "contact_damping": {},
+}
+#: truth numerics: radius factor |f - 1| in this range (sign drawn), solver safety range
+RADIUS_CHANGE = (0.10, 0.15)
+SAFETY_RANGE = (0.15, 0.22)
+
+
+@dataclass(frozen=True)
+class DemConcealedCase:
+    """A DEM-truth recording and its hidden truth (same interface as ``generator.ConcealedCase``).
+
+    effect : the concealed catalogue effect (None for a null case)
+    values : the effect's true parameters that are comparable with the ROM's (ROM names)
+    recalibration : true recalibration scales (always empty here: the soil is the same)
+    recording : the acquired channels (``accel_z``, ``velocity_z``)
+    truth : the truth's scenario overrides (effect + numerics)
+    drawn : every drawn scenario value of the effect (``physics.<effect>.<key>``)
+    baseline : the baseline simulation channels (CFC 60, as the run writes them)
+    """
+
+    effect: str | None
+    values: dict[str, float]
+    recalibration: dict[str, float]
+    seed: int
+    recording: dict[str, Signal]
+    truth: dict[str, Any]
+    trigger_offset_s: float = 0.0
+    meta: dict[str, Any] = field(default_factory=dict)
+    drawn: dict[str, float] = field(default_factory=dict)
+    baseline: dict[str, Signal] = field(default_factory=dict, repr=False)
+
+
+def scenario_path() -> Path:
+    """The drop-test scenario file used by the truth and the baseline."""
+    return SCENARIO
+
+
+def cache_dir() -> Path:
+    """Disk cache root (``$CRASHDEM_CACHE`` or ``~/.cache/crashdem``)."""
+    return Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem"))
+
+
+def _draw(lo: float, hi: float, scale: str, rng: np.random.Generator) -> float:
+    u = rng.uniform()
+    return math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))) if scale == "log" \
+        else lo + u * (hi - lo)
+
+
+def draw_dem_effect(effect: str, rng: np.random.Generator) -> dict[str, Any]:
+    """Scenario overrides switching ``effect`` on with parameters drawn from ``rng``."""
+    if effect not in DEM_EFFECT_DRAWS:
+        raise ValueError(f"effect={effect!r}: no DEM truth for it; allowed: "
+                         f"{sorted(DEM_EFFECT_DRAWS)}")
+    out: dict[str, Any] = {f"physics.{effect}.enabled": True}
+    for key, (lo, hi, scale) in DEM_EFFECT_DRAWS[effect].items():
+        out[f"physics.{effect}.{key}"] = _draw(lo, hi, scale, rng)
+    if effect == "initial_conditions" and rng.uniform() < 0.5:
+        out["physics.initial_conditions.velocity_offset"] *= -1.0
+    if effect == "cohesion":
+        out["physics.cohesion.shear_strength"] = out["physics.cohesion.normal_strength"]
+    return out
+
+
+#: sources whose change invalidates cached runs (the DEM, the body, the coupling, the run)
+_ROOT = Path(__file__).resolve().parents[2]
+_CODE = ("soil", "bodies", "coupling", "crashdem/run.py", "crashdem/sensors.py",
+         "crashdem/scenario.py", "crashdem/filters.py")
+
+
+def _code_fingerprint() -> bytes:
+    h = hashlib.sha256()
+    for rel in _CODE:
+        p = _ROOT / rel
+        files = sorted(p.rglob("*.py")) if p.is_dir() else [p]
+        for f in files:
+            if f.exists():
+                h.update(str(f.relative_to(_ROOT)).encode())
+                h.update(f.read_bytes())
+    return h.digest()
+
+
+def _key(overrides: dict[str, Any]) -> str:
+    """Cache key: scenario file, overrides and the sources of the simulation code."""
+    h = hashlib.sha256()
+    h.update(SCENARIO.read_bytes())
+    h.update(json.dumps(overrides, sort_keys=True, default=str).encode())
+    h.update(_code_fingerprint())
+    h.update(b"v1")
+    return h.hexdigest()[:20]
+
+
+def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = None
+            ) -> tuple[dict[str, Signal], dict[str, Any]]:
+    """Run (or load from the disk cache) the drop scenario with ``overrides`` on top of
+    ``BASE_OVERRIDES``; returns the ``accel_z`` / ``velocity_z`` channels (raw or CFC-filtered as
+    written by the run) on a time axis with t = 0 at first contact, and the run facts."""
+    from crashdem import scenario as sc
+
+    ov = {**BASE_OVERRIDES, **overrides}
+    root = (cache or cache_dir())
+    key = _key({**ov, "_filtered": filtered})
+    store = root / "diagnosis_truth"
+    store.mkdir(parents=True, exist_ok=True)
+    f = store / f"{key}.npz"
+    if f.exists():
+        try:
+            z = np.load(f, allow_pickle=False)
+            info = json.loads(str(z["info"]))
+            sigs = {name: Signal(name, z["t"], z[name], z[f"{name}__unit"].item(),
+                                 info.get("cfc") if filtered else None,
+                                 {"source": "crashdem DEM (cached)", "cache": str(f)})
+                    for name in CHANNELS.values()}
+            return sigs, info
+        except (OSError, KeyError, ValueError):
+            pass
+    from crashdem.results import open_result
+    from crashdem.run import run_scenario
+
+    runs = store / "runs"
+    runs.mkdir(parents=True, exist_ok=True)
+    pk = root / "packings"
+    pk.mkdir(parents=True, exist_ok=True)
+    link = runs / "packings"
+    if not link.exists():
+        try:
+            link.symlink_to(pk, target_is_directory=True)
+        except OSError:
+            pass
+    ov["scenario.name"] = f"diag_{key}"
+    scen = sc.load(SCENARIO, ov)
+    path = run_scenario(scen, out_dir=runs, progress=False)
+    import h5py
+
+    with h5py.File(path, "r") as h:
+        info = {k: (v.item() if hasattr(v, "item") else v) for k, v in h["run"].attrs.items()}
+    info = {k: (v if isinstance(v, (int, float, str)) else str(v)) for k, v in info.items()}
+    info["cfc"] = float(scen["instrumentation.cfc"])
+    sigs = {}
+    with open_result(path) as res:
+        for name, short in CHANNELS.items():
+            s = res.channel(name, filtered=filtered)
+            sigs[short] = Signal(short, np.asarray(s.t) - info["t_contact"], np.asarray(s.data),
+                                 s.unit, info["cfc"] if filtered else None,
+                                 {"source": f"crashdem DEM {path.name}"})
+    t = sigs["accel_z"].t
+    np.savez(f, t=t, info=json.dumps(info),
+             **{n: s.data for n, s in sigs.items()},
+             **{f"{n}__unit": np.array(s.unit) for n, s in sigs.items()})
+    try:  # the npz holds what is needed; keep the cache small
+        path.unlink()
+    except OSError:
+        pass
+    return sigs, info
+
+
+def dem_baseline(cache: Path | None = None) -> dict[str, Signal]:
+    """The baseline simulation (homogeneous bed, baseline numerics), CFC 60 channels."""
+    sigs, _ = run_dem(dict(BASELINE_NUMERICS), filtered=True, cache=cache)
+    return sigs
+
+
+def truth_numerics(rng: np.random.Generator, seed: int) -> dict[str, Any]:
+    """Numerics of a truth run that differ from ``BASELINE_NUMERICS``."""
+    sign = 1.0 if rng.uniform() < 0.5 else -1.0
+    f = 1.0 + sign * rng.uniform(*RADIUS_CHANGE)
+    return {"scenario.seed": 1000 + int(seed), "soil.radius": round(0.10 * f, 5),
+            "solver.safety": round(float(rng.uniform(*SAFETY_RANGE)), 4),
+            "instrumentation.sample_rate": TRUTH_SAMPLE_RATE}
+
+
+def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path | None = None
+                       ) -> DemConcealedCase:
+    """Generate a DEM-truth recording with one concealed effect (or none: ``effect=None``).
+
+    Parameters
+    ----------
+    seed : seeds the effect choice (``effect == "random"``), its parameters, the truth numerics,
+        the noise and the trigger offset
+    effect : a name of ``DEM_EFFECT_DRAWS``, ``"random"`` or None (null case: only numerics differ)
+    cache : cache root (default ``cache_dir()``)
+    """
+    rng = np.random.default_rng(seed)
+    if effect == "random":
+        names = sorted(DEM_EFFECT_DRAWS)
+        effect = names[int(rng.integers(len(names)))]
+    eff_ov = draw_dem_effect(effect, rng) if effect is not None else {}
+    num = truth_numerics(rng, seed)
+    truth_ov = {**num, **eff_ov}
+    raw, info = run_dem(truth_ov, filtered=False, cache=cache)
+    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
+    acc, vel = raw["accel_z"], raw["velocity_z"]
+    rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
+                          float(-vel.data[0]), rng, trigger_offset=offset,
+                          source=f"crashdem DEM truth (seed {num['scenario.seed']}, radius "
+                                 f"{num['soil.radius']:g} m, safety {num['solver.safety']:g})")
+    values: dict[str, float] = {}
+    drawn: dict[str, float] = {}
+    if effect is not None:
+        for key, rom_name in COMPARED[effect].items():
+            values[rom_name] = float(eff_ov[f"physics.{effect}.{key}"])
+        drawn = {k: float(v) for k, v in eff_ov.items() if not k.endswith(".enabled")}
+    return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset,
+                            {"particles": info.get("particles"), "dt": info.get("dt"),
+                             "wall_s": info.get("wall_s")}, drawn, dem_baseline(cache))
+
+
+class DemFullSimulator:
+    """The full DEM behind the ``screen_then_confirm`` interface: ``f(overrides) -> signals``.
+
+    ``overrides`` are scenario keys (``physics.<name>.*``) and ``calibration.*_scale`` factors,
+    applied to the baseline scenario (baseline numerics) as ``crashdem diagnose --full-confirm``
+    does (``cli._apply_scales``). Runs are cached like the truth runs; ``calls`` counts requests.
+    """
+
+    def __init__(self, cache: Path | None = None):
+        from crashdem import scenario as sc
+
+        self.cache = cache
+        self.calls = 0
+        self.scenario = sc.load(SCENARIO, {**BASE_OVERRIDES, **BASELINE_NUMERICS})
+
+    def __call__(self, overrides: dict[str, Any]) -> dict[str, Signal]:
+        from crashdem.diagnosis.cli import _apply_scales
+
+        self.calls += 1
+        scales = {k: v for k, v in overrides.items() if k.startswith("calibration.")}
+        keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
+        fields = {**_apply_scales(self.scenario, scales), **keys}
+        sigs, _ = run_dem({**BASELINE_NUMERICS, **fields}, filtered=True, cache=self.cache)
+        return sigs

@@ -1,0 +1,206 @@
+"""Diagnosis on concealed-effect recordings whose truth is the full DEM (issue 7).
+
+Truth: the small-resolution sphere drop run by crashdem's DEM with one ``physics.<effect>.*``
+switch drawn from the seed, another packing seed, a particle radius 10-15 % off and another
+time step (``generator_dem``), acquired like a lab channel (12.5 kHz integrating acquisition,
+noise, trigger offset, CFC 60). Baseline: the same scenario without the effect at the baseline
+numerics. Oracle: the generator's hidden truth (effect name, comparable parameter values).
+
+The DEM runs are cached on disk (``generator_dem.cache_dir()``); a cold cache costs about
+15 runs of 1-20 s each.
+
+The diagnosis is the full method: ROM screening calibrated to (and anchored on) the baseline
+simulation, then ``screen_then_confirm`` with the real DEM (``generator_dem.DemFullSimulator``)
+for the top ``TOP_K`` candidates.
+
+Status (measured, see docs/diagnosis.md "Validation on DEM truth"): the null cases claim no
+missing physics (model-error floor); layering, initial conditions and contact damping (2/2
+each) and sensor dynamics (1/2) are named; the issue's overall criteria (90 % named, all
+comparable parameters within 15 %, every score +0.1 to >= 0.85) are NOT met on DEM truth yet.
+Those assertions are kept unchanged and marked ``xfail`` (non-strict) so that they report
+progress without hiding the gap.
+"""
+from __future__ import annotations
+
+import time
+from collections import Counter
+
+import numpy as np
+import pytest
+
+from crashdem.diagnosis import fit, screen_then_confirm
+from crashdem.diagnosis.generator_dem import DemFullSimulator, dem_concealed_case
+
+#: effect types of the DEM truth (structural_crush: not available for the drop sphere)
+EFFECTS = ("soil_layering", "boundary_proximity", "initial_conditions", "sensor_dynamics",
+           "cohesion", "contact_damping")
+SEEDS = (11, 12)
+NULL_SEEDS = (21, 22)
+#: screened candidates confirmed with the full DEM (1 + TOP_K full runs at most per case)
+TOP_K = 2
+
+#: issue-7 acceptance numbers
+MIN_TOP1_RATE = 0.90
+PARAM_RTOL = 0.15
+MIN_SCORE_GAIN = 0.10
+MIN_SCORE_AFTER = 0.85
+
+GAP = ("DEM truth, measured: 7/12 effect cases named (floor proximity 0/2, cohesion 0/2, "
+       "sensor 1/2 missed), layering depth 28-31 % short (about one grain radius at r = 0.10 m), "
+       "final scores 0.75-0.94, capped near the 0.82-0.89 that two DEM packings of the same "
+       "physics score against each other; see docs/diagnosis.md 'Validation on DEM truth'")
+
+
+@pytest.fixture(scope="session")
+def dem_runs():
+    out = []
+    cases = [(e, s) for e in EFFECTS for s in SEEDS] + [(None, s) for s in NULL_SEEDS]
+    for effect, seed in cases:
+        t0 = time.perf_counter()
+        case = dem_concealed_case(seed, effect)
+        t1 = time.perf_counter()
+        full = DemFullSimulator()
+        rep = screen_then_confirm(case.baseline, case.recording, full, top_k=TOP_K)
+        out.append((case, rep, t1 - t0, time.perf_counter() - t1))
+    conf = Counter((c.effect or "null", r.missing_physics or "none") for c, r, _, _ in out)
+    top = Counter((c.effect or "null", r.hypotheses[0]["name"]) for c, r, _, _ in out)
+    print("\nDEM truth -- confusion (truth -> claimed missing physics):")
+    for (tr, cl), n in sorted(conf.items()):
+        print(f"  {tr:20s} -> {cl:25s} x{n}")
+    print("DEM truth -- truth -> top-ranked hypothesis:")
+    for (tr, cl), n in sorted(top.items()):
+        print(f"  {tr:20s} -> {cl:25s} x{n}")
+    print(f"metric: {fit.metric_name()}")
+    for c, r, tg, td in out:
+        h = r.hypotheses[0]
+        print(f"  {str(c.effect):20s} seed {c.seed}: confirmed={r.missing_physics} screened top="
+              f"{h['name']} dBIC={h['delta_bic_vs_recalibration']:.1f} score "
+              f"{r.fit['before']['overall']:.3f} -> {_after(r):.3f} truth={c.values} "
+              f"fitted={ {k: round(v, 4) for k, v in h['parameters'].items()} } "
+              f"n_eff={r.fit['n_effective']:.0f} full runs={r.simulations['full_simulations']} "
+              f"gen {tg:.1f} s diag {td:.1f} s")
+    return out
+
+
+def _after(r) -> float:
+    """Final score: the confirmed full run, else the screening's refit."""
+    return r.fit["after_full"]["overall"] if r.fit.get("after_full") else r.fit["after"]["overall"]
+
+
+def _effect_runs(runs):
+    return [(c, r) for c, r, _, _ in runs if c.effect is not None]
+
+
+def test_generator_truth_differs_in_numerics(dem_runs):
+    """Every truth differs from the baseline in packing seed, radius (10-15 %) and time step,
+    and the recording is a lab-like channel (12.5 kHz, CFC 60, pre-trigger)."""
+    for c, _, _, _ in dem_runs:
+        t = c.truth
+        assert t["scenario.seed"] != 1
+        assert 0.10 - 1e-4 <= abs(t["soil.radius"] / 0.10 - 1.0) <= 0.15 + 1e-4
+        assert t["solver.safety"] != 0.3
+        a = c.recording["accel_z"]
+        assert a.cfc == 60.0 and abs(a.fs - 12500.0) < 1e-6 and a.t[0] < -0.07
+        assert a.unit == "m/s^2" and c.recording["velocity_z"].unit == "m/s"
+    assert len({c.effect for c, _, _, _ in dem_runs if c.effect}) >= 5
+
+
+def test_dem_null_cases_claim_no_missing_physics(dem_runs):
+    """Null recordings (same physics, other packing / radius / time step, noise) claim nothing:
+    the granular model-form error is counted as correlated error, not as evidence."""
+    nulls = [(c, r) for c, r, _, _ in dem_runs if c.effect is None]
+    assert len(nulls) == len(NULL_SEEDS)
+    for c, r in nulls:
+        assert r.missing_physics is None, (c.seed, r.decision)
+
+
+def test_dem_diagnosis_cost(dem_runs):
+    """Screening plus full-DEM confirmation of one recording stays far below the 15 min budget
+    and needs at most 1 + TOP_K full simulations."""
+    for c, r, _, td in dem_runs:
+        assert td < 300.0, (c.effect, c.seed, td)
+        assert 1 <= r.simulations["full_simulations"] <= 1 + TOP_K
+
+
+@pytest.mark.xfail(reason=GAP, strict=False)
+def test_dem_top_ranked_is_the_concealed_effect(dem_runs):
+    """>= 90 % of the DEM effect cases name the concealed effect (confirmed answer)."""
+    er = _effect_runs(dem_runs)
+    claimed = np.mean([r.missing_physics == c.effect for c, r in er])
+    assert claimed >= MIN_TOP1_RATE, claimed
+
+
+@pytest.mark.xfail(reason=GAP, strict=False)
+def test_dem_parameters_within_15_percent(dem_runs):
+    """Comparable parameters (``generator_dem.COMPARED``: depths, speed, mount frequency) of the
+    named hypothesis are within 15 %; every case must be identified."""
+    bad = []
+    for c, r in _effect_runs(dem_runs):
+        if r.missing_physics != c.effect:
+            bad.append((c.effect, c.seed, "not identified", r.missing_physics))
+            continue
+        h = next(h for h in r.hypotheses if h["name"] == c.effect)
+        for k, v in c.values.items():
+            if abs(h["parameters"][k] / v - 1.0) > PARAM_RTOL:
+                bad.append((c.effect, c.seed, k, v, h["parameters"][k]))
+    assert not bad, bad
+
+
+@pytest.mark.xfail(reason=GAP, strict=False)
+def test_dem_score_improves(dem_runs):
+    """ISO/TS 18571 (final answer) improves by >= 0.1 and ends >= 0.85 in every effect case."""
+    bad = []
+    for c, r in _effect_runs(dem_runs):
+        before, after = r.fit["before"]["overall"], _after(r)
+        if after < MIN_SCORE_AFTER or after - before < MIN_SCORE_GAIN:
+            bad.append((c.effect, c.seed, round(before, 3), round(after, 3)))
+    assert not bad, bad
+
+
+def test_full_dem_confirmation_of_layering(dem_runs):
+    """``screen_then_confirm`` with the real DEM as full simulator (small resolution, baseline
+    numerics) on the DEM-truth layering case of seed 11: the screening ranks soil_layering
+    first without claiming it (Delta BIC below the margin once the granular model error is
+    counted); the full DEM run of the screened candidate (interface 0.19 m, lower E x5)
+    confirms it against both the baseline and the recalibrated full run, with 1 + TOP_K full
+    simulations and an ISO/TS 18571 gain >= 0.1."""
+    c, r = next((c, r) for c, r, _, _ in dem_runs if c.effect == "soil_layering" and c.seed == 11)
+    assert r.hypotheses[0]["name"] == "soil_layering"
+    assert r.missing_physics == "soil_layering", r.decision
+    assert r.simulations["full_simulations"] == 1 + TOP_K
+    conf = {row["hypothesis"]: row for row in r.fit["confirmation"]}
+    assert conf["soil_layering"]["delta_bic_vs_reference"] > fit.ACCEPT_MARGIN
+    after = r.fit["after_full"]["overall"]
+    assert after - r.fit["before"]["overall"] >= MIN_SCORE_GAIN
+    assert after >= MIN_SCORE_AFTER
+
+
+@pytest.mark.parametrize("seed, effect", [(21, None), (11, "initial_conditions")])
+def test_cli_runs_the_baseline_dem_itself(tmp_path, seed, effect):
+    """``crashdem diagnose --scenario S --recording REC`` with no result of S on disk runs S with
+    the full DEM (``--baseline run``, the default), anchors the screening on it and reaches the
+    same verdict as the library path: nothing claimed on a null DEM-truth recording, the
+    concealed effect named otherwise. Oracle: the generator's hidden truth."""
+    import json
+
+    from crashdem import cli
+    from crashdem.diagnosis import generator_dem as gd
+    from crashdem.recordings import write_recording
+
+    case = dem_concealed_case(seed, effect)
+    rec_path = write_recording(tmp_path / "rec.csv", case.recording)
+    out = tmp_path / "out"
+    (out / "baseline").mkdir(parents=True)
+    pk = gd.cache_dir() / "packings"  # reuse the generator's deposited beds
+    pk.mkdir(parents=True, exist_ok=True)
+    (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
+    sets = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in {**gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS,
+                                     "scenario.name": f"cli_baseline_{seed}"}.items()]
+    argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
+            "--out", str(out)]
+    for s in sets:
+        argv += ["--set", s]
+    assert cli.main(argv) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["simulations"]["baseline_source"].startswith("full run")
+    assert rep["missing_physics"] == effect
