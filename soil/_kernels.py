@@ -146,12 +146,23 @@ def integrate(x, v, w, f, t, inv_mass, inv_inertia, dt, damping, e_glob, x_ref, 
 # ----------------------------------------------------------------------------------------------
 # neighbour search
 # ----------------------------------------------------------------------------------------------
+# Memory layout (see docs/performance.md): the rebuild works in persistent buffers owned by the
+# Simulation and allocates nothing while their capacities suffice.  The contact history of the
+# pairs that carry any (touching or bonded pairs; the other rows are all-zero) is first saved
+# into a compact store (CSR by row, ``s_start``), the new half list is written into the same
+# pair buffers, and the history is restored from the store.  Peak = the pair buffers + the
+# store of the active pairs (about a third of the Verlet pairs), instead of two full lists.
 @jit
-def cell_sort(x, is_large, lo, inv_cell, nx, ny, nz, cell_of):
-    """Counting sort of the small particles into cells; returns (cell_start, cell_list)."""
+def cell_sort_into(x, is_large, lo, inv_cell, nx, ny, nz, cell_of, cell_start, cell_list):
+    """Counting sort of the small particles into cells, in place.
+
+    ``cell_start`` needs at least ncell + 2 entries; on return cell c holds
+    ``cell_list[cell_start[c]:cell_start[c + 1]]`` in increasing particle index.
+    """
     n = x.shape[0]
     ncell = nx * ny * nz
-    counts = np.zeros(ncell + 1, np.int64)
+    for c in range(ncell + 2):
+        cell_start[c] = 0
     for i in range(n):
         if is_large[i]:
             cell_of[i] = -1
@@ -164,17 +175,16 @@ def cell_sort(x, is_large, lo, inv_cell, nx, ny, nz, cell_of):
         cz = min(max(cz, 0), nz - 1)
         c = (cz * ny + cy) * nx + cx
         cell_of[i] = c
-        counts[c + 1] += 1
-    for c in range(ncell):
-        counts[c + 1] += counts[c]
-    fill = counts[:-1].copy()
-    cell_list = np.empty(counts[ncell], np.int32)
+        cell_start[c + 2] += 1
+    for c in range(1, ncell + 1):
+        cell_start[c + 1] += cell_start[c]
+    # cell_start[c + 1] is now the start of cell c; placing advances it to the start of c + 1
     for i in range(n):
         c = cell_of[i]
         if c >= 0:
-            cell_list[fill[c]] = i
-            fill[c] += 1
-    return counts, cell_list
+            q = cell_start[c + 1]
+            cell_list[q] = i
+            cell_start[c + 1] = q + 1
 
 
 @numba.njit(cache=True, inline="always")
@@ -235,40 +245,23 @@ def _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of,
     return cnt
 
 
-@pjit
-def count_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
-                     skin, counts):
-    n = x.shape[0]
-    dummy = np.empty(0, np.int32)
-    for i in prange(n):
-        counts[i] = _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of,
-                              nx, ny, nz, skin, dummy, False)
-
-
-@pjit
-def fill_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
-                    skin, row_start, nbr):
-    n = x.shape[0]
-    for i in prange(n):
-        a = row_start[i]
-        b = row_start[i + 1]
-        row = nbr[a:b]
-        _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
-                  skin, row, True, b - a)
-        # insertion sort (rows are short)
-        for p in range(1, b - a):
-            key = row[p]
-            q = p - 1
-            while q >= 0 and row[q] > key:
-                row[q + 1] = row[q]
-                q -= 1
-            row[q + 1] = key
+@numba.njit(cache=True, inline="always")
+def _sort_row(row, m):
+    """Insertion sort of row[:m] (rows are short)."""
+    for p in range(1, m):
+        key = row[p]
+        q = p - 1
+        while q >= 0 and row[q] > key:
+            row[q + 1] = row[q]
+            q -= 1
+        row[q + 1] = key
 
 
 @pjit
 def scan_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz,
                     skin, buf, counts):
-    """Single pass: neighbours of row i into ``buf[i, :cap]`` (sorted) and the full count."""
+    """Single pass: neighbours of row i into ``buf[i, :cap]`` (sorted) and the full count
+    into ``counts[i]``."""
     n = x.shape[0]
     cap = buf.shape[1]
     for i in prange(n):
@@ -276,23 +269,27 @@ def scan_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_
         c = _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny,
                       nz, skin, row, True, cap)
         counts[i] = c
-        m = min(c, cap)
-        for p in range(1, m):
-            key = row[p]
-            q = p - 1
-            while q >= 0 and row[q] > key:
-                row[q + 1] = row[q]
-                q -= 1
-            row[q + 1] = key
+        _sort_row(row, min(c, cap))
 
 
 @pjit
-def compact_neighbours(buf, row_start, nbr):
+def place_neighbours(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny,
+                     nz, skin, buf, row_start, nbr):
+    """Rows into the CSR list: copied from ``buf``, or re-scanned when longer than its
+    width."""
     n = buf.shape[0]
+    cap = buf.shape[1]
     for i in prange(n):
         a = row_start[i]
-        for k in range(row_start[i + 1] - a):
-            nbr[a + k] = buf[i, k]
+        m = row_start[i + 1] - a
+        if m <= cap:
+            for k in range(m):
+                nbr[a + k] = buf[i, k]
+        else:
+            row = nbr[a:a + m]
+            _row_scan(i, x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny,
+                      nz, skin, row, True, m)
+            _sort_row(row, m)
 
 
 @jit
@@ -337,59 +334,121 @@ def _find(nbr, a, b, j):
     return -1
 
 
+@numba.njit(cache=True, inline="always")
+def _carries_history(hf, hi, k):
+    """True when pair k's history row is not all +0.0 / 0 (exact bit test: -0.0 counts)."""
+    for c in range(hf.shape[1]):
+        v = hf[k, c]
+        if v != 0.0 or math.copysign(1.0, v) < 0.0:
+            return True
+    for c in range(hi.shape[1]):
+        if hi[k, c] != 0:
+            return True
+    return False
+
+
 @pjit
-def transfer_history(old_start, old_nbr, new_start, new_nbr, old_f, new_f, old_i, new_i):
-    """Copy per-pair history (float columns ``old_f`` (M, K), int columns ``old_i`` (M, L)) from
-    the old to the new half list; new pairs get zeros."""
-    n = new_start.shape[0] - 1
-    kf = old_f.shape[1]
-    ki = old_i.shape[1]
+def count_history(row_start, hf, hi, counts):
+    """Number of pairs of each row that carry history (``counts[i]``)."""
+    n = counts.shape[0]
     for i in prange(n):
-        a0 = old_start[i]
-        b0 = old_start[i + 1]
-        for k in range(new_start[i], new_start[i + 1]):
-            q = _find(old_nbr, a0, b0, new_nbr[k])
-            if q >= 0:
+        c = 0
+        for k in range(row_start[i], row_start[i + 1]):
+            if _carries_history(hf, hi, k):
+                c += 1
+        counts[i] = c
+
+
+@pjit
+def save_history(row_start, nbr, hf, hi, s_start, s_j, s_f, s_i):
+    """Copy the pairs that carry history into the store (row i at s_start[i]:s_start[i+1])."""
+    n = s_start.shape[0] - 1
+    kf = hf.shape[1]
+    ki = hi.shape[1]
+    for i in prange(n):
+        w = s_start[i]
+        for k in range(row_start[i], row_start[i + 1]):
+            if _carries_history(hf, hi, k):
+                s_j[w] = nbr[k]
                 for c in range(kf):
-                    new_f[k, c] = old_f[q, c]
+                    s_f[w, c] = hf[k, c]
                 for c in range(ki):
-                    new_i[k, c] = old_i[q, c]
+                    s_i[w, c] = hi[k, c]
+                w += 1
+
+
+@pjit
+def restore_history(s_start, s_j, s_f, s_i, row_start, nbr, hf, hi):
+    """History of the new list from the store (sorted merge per row); other pairs get zeros.
+
+    Same result as copying the old row of every surviving pair: a pair absent from the store
+    had an all-zero row.
+    """
+    n = row_start.shape[0] - 1
+    kf = hf.shape[1]
+    ki = hi.shape[1]
+    for i in prange(n):
+        q = s_start[i]
+        qe = s_start[i + 1]
+        for k in range(row_start[i], row_start[i + 1]):
+            j = nbr[k]
+            while q < qe and s_j[q] < j:
+                q += 1  # stored pair no longer in the list (only bonds can: lost_bonds)
+            if q < qe and s_j[q] == j:
+                for c in range(kf):
+                    hf[k, c] = s_f[q, c]
+                for c in range(ki):
+                    hi[k, c] = s_i[q, c]
+                q += 1
             else:
                 for c in range(kf):
-                    new_f[k, c] = 0.0
+                    hf[k, c] = 0.0
                 for c in range(ki):
-                    new_i[k, c] = 0
+                    hi[k, c] = 0
 
 
 @jit
-def lost_bonds(old_start, old_nbr, new_start, new_nbr, old_i):
-    """Number of active bonds of the old list that are absent from the new one."""
-    n = new_start.shape[0] - 1
+def lost_bonds(s_start, s_j, s_i, row_start, nbr):
+    """Number of active bonds of the store that are absent from the new list."""
+    n = row_start.shape[0] - 1
     lost = 0
+    if s_i.shape[1] == 0:
+        return 0
     for i in range(n):
-        for q in range(old_start[i], old_start[i + 1]):
-            if old_i.shape[1] > 0 and old_i[q, 0] == BOND_ACTIVE:
-                if _find(new_nbr, new_start[i], new_start[i + 1], old_nbr[q]) < 0:
+        for q in range(s_start[i], s_start[i + 1]):
+            if s_i[q, 0] == BOND_ACTIVE:
+                if _find(nbr, row_start[i], row_start[i + 1], s_j[q]) < 0:
                     lost += 1
     return lost
 
 
 @jit
-def transpose(row_start, nbr, n):
-    """CSR of pair indices by second particle j, each list in increasing pair index."""
-    m = nbr.shape[0]
-    t_start = np.zeros(n + 1, np.int64)
+def transpose_into(row_start, nbr, t_start, t_pair, fill):
+    """CSR of pair indices by second particle j, each list in increasing pair index.
+
+    ``fill`` is an (n,) integer scratch array."""
+    n = row_start.shape[0] - 1
+    m = row_start[n]
+    for i in range(n + 1):
+        t_start[i] = 0
     for k in range(m):
         t_start[nbr[k] + 1] += 1
     for i in range(n):
         t_start[i + 1] += t_start[i]
-    fill = t_start[:-1].copy()
-    t_pair = np.empty(m, np.int64)
+    for i in range(n):
+        fill[i] = t_start[i]
     for k in range(m):
         j = nbr[k]
         t_pair[fill[j]] = k
         fill[j] += 1
-    return t_start, t_pair
+
+
+@jit
+def prefix_sum(a):
+    """In place: a[0] = 0 is kept, a[k + 1] += a[k] (counts in a[1:] -> CSR starts)."""
+    for k in range(a.shape[0] - 1):
+        a[k + 1] += a[k]
+    return a[a.shape[0] - 1]
 
 
 # ----------------------------------------------------------------------------------------------
@@ -800,9 +859,9 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                     has_visc, has_roll):
     """Forces of boundary contacts (sorted by key), history carried by key (particle, element).
 
-    ``new_hist[c]`` = (Fs[3], n[3], fn, kn, ks, M_roll[3], kr). Adds forces/torques to particles, the wrench
-    (about the body's reference point) and power to bodies, dissipation to ``b_diss[body]``
-    (friction, viscous).
+    ``new_hist[c]`` = (Fs[3], n[3], fn, kn, ks, M_roll[3], kr). Adds forces/torques to
+    particles, the wrench (about the body's reference point) and power to bodies, dissipation
+    to ``b_diss[body]`` (friction, viscous).
 
     Notes
     -----

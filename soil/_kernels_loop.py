@@ -16,19 +16,25 @@ from soil import _kernels as K
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel
-_compact = K.compact_neighbours.parallel
-_fill = K.fill_neighbours.parallel
-_transfer = K.transfer_history.parallel
+_place = K.place_neighbours.parallel
+_count_hist = K.count_history.parallel
+_save_hist = K.save_history.parallel
+_restore_hist = K.restore_history.parallel
 _pair = K.pair_forces.parallel
 _gather = K.gather.parallel
 _acount = K.analytic_contacts_count.parallel
 _afill = K.analytic_contacts_fill.parallel
-_cell_sort = K.cell_sort
+_cell_sort = K.cell_sort_into
 _bounds = K.bounds
-_transpose = K.transpose
+_transpose = K.transpose_into
 _lost = K.lost_bonds
+_prefix = K.prefix_sum
 _bforces = K.boundary_forces
 
+#: rows longer than the scan buffer are re-scanned; when more than 1/BUF_GROW_RATIO of the rows
+#: overflow, the buffer is widened for the next rebuild
+BUF_GROW_RATIO = 64
+BUF_MAX_COLS = 64
 
 @numba.njit(cache=True)
 def advance_rotation(rot, omega, dt):
@@ -107,53 +113,96 @@ def grid_dims(lo, hi, cell, n):
 
 
 @numba.njit(cache=True)
-def build_list(x, radius, is_large, large_idx, r_small, skin, row_start, nbr, hf, hi, buf_cols,
-               has_coh):
-    """Neighbour list rebuild with history transfer; returns the new arrays and lost bonds."""
+def grow(size):
+    """Capacity for ``size`` entries (+25 %, integer arithmetic: same in Python and Numba)."""
+    return size + size // 4 + 16
+
+
+@numba.njit(cache=True)
+def buffer_width(counts, width):
+    """Scan-buffer width for the next rebuild: doubled (up to BUF_MAX_COLS) when more than
+    1/BUF_GROW_RATIO of the rows overflowed this one."""
+    n = counts.shape[0]
+    over = 0
+    for i in range(n):
+        if counts[i] > width:
+            over += 1
+    if over * BUF_GROW_RATIO > n and width < BUF_MAX_COLS:
+        return min(2 * width, BUF_MAX_COLS)
+    return width
+
+
+@numba.njit(cache=True)
+def rebuild(x, radius, is_large, large_idx, r_small, skin, row_start, t_start, nbr, hf, hi, tq,
+            t_pair, s_j, s_f, s_i, cell_of, cell_start, cell_list, buf, has_coh, has_rot):
+    """Neighbour-list rebuild in the persistent buffers (no allocation while capacities suffice).
+
+    1. the pairs that carry history are saved into the store (``s_*``; ``t_start`` serves as
+       its row starts); 2. cell sort; 3. single-pass scan into ``buf`` with the row counts
+    written to ``row_start[1:]``; 4. rows placed into ``nbr``; 5. history restored from the
+    store; 6. transposed list (``cell_of`` as scratch).  Buffers too small are replaced by
+    larger ones (``grow``).  Returns the (possibly new) buffers, the number of pairs and the
+    number of bonds lost to the skin.
+    """
     n = x.shape[0]
+    # 1. history store
+    _count_hist(row_start, hf, hi, t_start[1:])
+    t_start[0] = 0
+    a = _prefix(t_start)
+    if a > s_j.shape[0]:
+        cap = grow(a)
+        s_j = np.empty(cap, np.int32)
+        s_f = np.empty((cap, hf.shape[1]))
+        s_i = np.empty((cap, hi.shape[1]), np.int32)
+    _save_hist(row_start, nbr, hf, hi, t_start, s_j, s_f, s_i)
+    # 2. cells
     lo, hi_ = _bounds(x, is_large)
     cell, nx, ny, nz = grid_dims(lo, hi_, 2.0 * r_small + skin, n)
-    cell_of = np.empty(n, np.int64)
-    cell_start, cell_list = _cell_sort(x, is_large, lo, 1.0 / cell, nx, ny, nz, cell_of)
-    counts = np.empty(n, np.int64)
-    buf = np.empty((n, buf_cols), np.int32)
+    if cell_start.shape[0] < nx * ny * nz + 2:
+        cell_start = np.empty(grow(nx * ny * nz + 2), np.int64)
+    _cell_sort(x, is_large, lo, 1.0 / cell, nx, ny, nz, cell_of, cell_start, cell_list)
+    # 3. scan
     _scan(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz, skin, buf,
-          counts)
-    new_start = np.zeros(n + 1, np.int64)
-    cmax = 0
-    for i in range(n):
-        new_start[i + 1] = new_start[i] + counts[i]
-        cmax = max(cmax, counts[i])
-    m = new_start[n]
-    new_nbr = np.empty(m, np.int32)
-    if cmax <= buf_cols:
-        _compact(buf, new_start, new_nbr)
-    else:
-        _fill(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz, skin,
-              new_start, new_nbr)
-    new_hf = np.empty((m, hf.shape[1]))
-    new_hi = np.empty((m, hi.shape[1]), np.int32)
-    _transfer(row_start, nbr, new_start, new_nbr, hf, new_hf, hi, new_hi)
+          row_start[1:])
+    row_start[0] = 0
+    width = buffer_width(row_start[1:], buf.shape[1])
+    m = _prefix(row_start)
+    if m > nbr.shape[0]:
+        cap = grow(m)
+        nbr = np.empty(cap, np.int32)
+        hf = np.empty((cap, hf.shape[1]))
+        hi = np.empty((cap, hi.shape[1]), np.int32)
+        t_pair = np.empty(cap, np.int32)
+        if has_rot:
+            tq = np.empty((cap, 6))
+    # 4. rows
+    _place(x, radius, is_large, large_idx, cell_start, cell_list, cell_of, nx, ny, nz, skin, buf,
+           row_start, nbr)
+    if width != buf.shape[1]:
+        buf = np.empty((n, width), np.int32)
+    # 5. history
+    _restore_hist(t_start, s_j, s_f, s_i, row_start, nbr, hf, hi)
     lost = 0
     if has_coh:
-        lost = _lost(row_start, nbr, new_start, new_nbr, hi)
-    t_start, t_pair = _transpose(new_start, new_nbr, n)
-    return new_start, new_nbr, new_hf, new_hi, t_start, t_pair, lost
+        lost = _lost(t_start, s_j, s_i, row_start, nbr)
+    if has_rot:
+        tq[:m] = 0.0
+    # 6. transpose
+    _transpose(row_start, nbr, t_start, t_pair, cell_of)
+    return nbr, hf, hi, tq, t_pair, s_j, s_f, s_i, cell_start, buf, m, lost
 
 
 @numba.njit(cache=True)
 def boundary_step(x, v, w, radius, mass, mat_id, mat, n_analytic, etype, ep, en, er, ea0, ea1,
                   key_mult, ebody, b_mat, b_pos, b_vel, b_omg, b_ref, bkey, bhist, f, t,
-                  b_force, b_torque, b_power, b_diss, dt, has_rot, has_visc, has_roll):
+                  b_force, b_torque, b_power, b_diss, dt, has_rot, has_visc, has_roll, start):
+    """Analytic boundary contacts and forces; ``start`` (n + 1 integers) is scratch."""
     n = x.shape[0]
-    counts = np.empty(n, np.int64)
     et = etype[:n_analytic]
     er_a = er[:n_analytic]
-    _acount(x, radius, et, ep, en, er_a, ea0, ea1, counts)
-    start = np.zeros(n + 1, np.int64)
-    for i in range(n):
-        start[i + 1] = start[i] + counts[i]
-    nc = start[n]
+    _acount(x, radius, et, ep, en, er_a, ea0, ea1, start[1:])
+    start[0] = 0
+    nc = _prefix(start)
     c_p = np.empty(nc, np.int64)
     c_e = np.empty(nc, np.int64)
     c_n = np.empty((nc, 3))
@@ -174,13 +223,14 @@ def boundary_step(x, v, w, radius, mass, mat_id, mat, n_analytic, etype, ep, en,
 @numba.njit(cache=True)
 def run_steps(nsteps, dt, x, v, w, f, t, radius, mass, inv_mass, inv_inertia, mat_id, mat,
               gravity, damping, e_glob, e_fric, e_visc, e_bond, x_ref, skin, is_large, large_idx,
-              r_small, buf_cols, row_start, nbr, hf, hi, tq, t_start, t_pair, n_analytic, etype,
-              ebody, ep_body, en_body, er, ea0, ea1, ep, en, key_mult, b_mat, b_moving, b_pos,
-              b_rot, b_vel, b_omg, b_refb, b_ref, b_force, b_torque, b_power, b_diss, b_impulse,
-              b_ang_impulse, b_work, bkey, bhist, c_p, c_e, c_n, c_d, c_pt, has_rot, has_coh,
-              has_roll, has_visc):
-    """``nsteps`` DEM steps (same sequence as ``Simulation._steps``); returns the arrays that a
-    rebuild or the boundary search replaces, plus (#builds, #bonds lost to the skin)."""
+              r_small, row_start, t_start, nbr, hf, hi, tq, t_pair, s_j, s_f, s_i, cell_of,
+              cell_start, cell_list, buf, b_start, m, n_analytic, etype, ebody, ep_body, en_body,
+              er, ea0, ea1, ep, en, key_mult, b_mat, b_moving, b_pos, b_rot, b_vel, b_omg, b_refb,
+              b_ref, b_force, b_torque, b_power, b_diss, b_impulse, b_ang_impulse, b_work, bkey,
+              bhist, c_p, c_e, c_n, c_d, c_pt, has_rot, has_coh, has_roll, has_visc):
+    """``nsteps`` DEM steps (same sequence as ``Simulation._steps``); returns the buffers that a
+    rebuild may replace (grown), the number of pairs, the boundary contact arrays, plus
+    (#builds, #bonds lost to the skin)."""
     nb = b_pos.shape[0]
     half_skin2 = (0.5 * skin) ** 2
     n_builds = 0
@@ -206,12 +256,10 @@ def run_steps(nsteps, dt, x, v, w, f, t, radius, mass, inv_mass, inv_inertia, ma
             update_elements(ebody[:n_analytic], ep_body, en_body, b_pos, b_rot, b_refb, ep, en,
                             b_ref)
         if moved:
-            row_start, nbr, hf, hi, t_start, t_pair, lo_ = build_list(
-                x, radius, is_large, large_idx, r_small, skin, row_start, nbr, hf, hi, buf_cols,
-                has_coh)
+            nbr, hf, hi, tq, t_pair, s_j, s_f, s_i, cell_start, buf, m, lo_ = rebuild(
+                x, radius, is_large, large_idx, r_small, skin, row_start, t_start, nbr, hf, hi,
+                tq, t_pair, s_j, s_f, s_i, cell_of, cell_start, cell_list, buf, has_coh, has_rot)
             lost += lo_
-            if has_rot:
-                tq = np.zeros((nbr.shape[0], 6))
             x_ref[:] = x
             n_builds += 1
         _pair(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, dt, has_rot,
@@ -221,6 +269,6 @@ def run_steps(nsteps, dt, x, v, w, f, t, radius, mass, inv_mass, inv_inertia, ma
             bkey, bhist, c_p, c_e, c_n, c_d, c_pt = boundary_step(
                 x, v, w, radius, mass, mat_id, mat, n_analytic, etype, ep, en, er, ea0, ea1,
                 key_mult, ebody, b_mat, b_pos, b_vel, b_omg, b_ref, bkey, bhist, f, t, b_force,
-                b_torque, b_power, b_diss, dt, has_rot, has_visc, has_roll)
-    return (row_start, nbr, hf, hi, tq, t_start, t_pair, bkey, bhist, c_p, c_e, c_n, c_d, c_pt,
-            n_builds, lost)
+                b_torque, b_power, b_diss, dt, has_rot, has_visc, has_roll, b_start)
+    return (nbr, hf, hi, tq, t_pair, s_j, s_f, s_i, cell_start, buf, m, bkey, bhist, c_p, c_e,
+            c_n, c_d, c_pt, n_builds, lost)

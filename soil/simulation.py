@@ -29,8 +29,9 @@ PARALLEL_MIN_PARTICLES = 4000
 FUSED_LOOP = True
 #: use the serial kernel variants (prange compiled as range); for verification only
 FORCE_SERIAL = False
-#: neighbours per row kept by the single-pass scan (rows with more take a second pass)
-NEIGHBOUR_BUFFER = 24
+#: initial width of the neighbour scan buffer (rows with more neighbours are re-scanned; the
+#: width doubles when more than 1/64 of the rows overflow, see _kernels_loop.buffer_width)
+NEIGHBOUR_BUFFER = 12
 #: default Verlet skin as a fraction of the median radius
 DEFAULT_SKIN_FRACTION = 0.4
 
@@ -270,12 +271,23 @@ class Simulation:
         self.bonds_lost_to_skin = 0
         self._x_ref = p.x.copy()
         self._row_start = np.zeros(n + 1, np.int64)
-        self._nbr = np.zeros(0, np.int32)
-        self._hf = np.zeros((0, self._ncol))
-        self._hi = np.zeros((0, self._nicol), np.int32)
-        self._tq = np.zeros((0, 6))
         self._t_start = np.zeros(n + 1, np.int64)
-        self._t_pair = np.zeros(0, np.int64)
+        # pair buffers (capacity >= number of pairs self._m; the live part is [:self._m])
+        self._m = 0
+        self._nbr_buf = np.zeros(0, np.int32)
+        self._hf_buf = np.zeros((0, self._ncol))
+        self._hi_buf = np.zeros((0, self._nicol), np.int32)
+        self._tq_buf = np.zeros((0, 6))
+        self._tp_buf = np.zeros(0, np.int32)
+        # rebuild scratch: history store, cell grid, scan buffer (persistent, see _build)
+        self._s_j = np.zeros(0, np.int32)
+        self._s_f = np.zeros((0, self._ncol))
+        self._s_i = np.zeros((0, self._nicol), np.int32)
+        self._cell_of = np.zeros(n, np.int32)
+        self._cell_start = np.zeros(0, np.int64)
+        self._cell_list = np.zeros(n, np.int32)
+        self._nbuf = np.zeros((n, NEIGHBOUR_BUFFER), np.int32)
+        self._b_start = np.zeros(n + 1, np.int64)
         self._e_fric = np.zeros(n)
         self._e_visc = np.zeros(n)
         self._e_glob = np.zeros(n)
@@ -292,7 +304,48 @@ class Simulation:
         self._b_torque = np.zeros((nb, 3))
         self._b_power = np.zeros(nb)
         self._b_diss = np.zeros((nb, 2))
-        self._counts_b = np.zeros(n, np.int64)
+
+    # live views of the pair buffers (length = number of pairs in the half list)
+    @property
+    def _nbr(self):
+        return self._nbr_buf[:self._m]
+
+    @_nbr.setter
+    def _nbr(self, a):
+        self._nbr_buf = np.ascontiguousarray(a, np.int32)
+        self._m = self._nbr_buf.shape[0]
+
+    @property
+    def _hf(self):
+        return self._hf_buf[:self._m]
+
+    @_hf.setter
+    def _hf(self, a):
+        self._hf_buf = np.ascontiguousarray(a, np.float64)
+
+    @property
+    def _hi(self):
+        return self._hi_buf[:self._m]
+
+    @_hi.setter
+    def _hi(self, a):
+        self._hi_buf = np.ascontiguousarray(a, np.int32)
+
+    @property
+    def _tq(self):
+        return self._tq_buf[:self._m]
+
+    @_tq.setter
+    def _tq(self, a):
+        self._tq_buf = np.ascontiguousarray(a, np.float64)
+
+    @property
+    def _t_pair(self):
+        return self._tp_buf[:self._m]
+
+    @_t_pair.setter
+    def _t_pair(self, a):
+        self._tp_buf = np.ascontiguousarray(a, np.int32)
 
     def _update_elements(self):
         """World-frame element geometry and body kinematic arrays from the body poses."""
@@ -321,51 +374,65 @@ class Simulation:
     # neighbour list
     # ------------------------------------------------------------------------------------------
     def _build(self):
+        """Neighbour-list rebuild in the persistent buffers; the same sequence as
+        ``_kernels_loop.rebuild`` with this simulation's kernel variants (serial or prange)."""
         p = self.particles
         n = p.n
         x = p.x
         if n == 0:
             return
-        lo, hi = self._K.bounds(x, self._is_large)
-        r_small = self._r_small
-        cell = 2.0 * r_small + self.skin
-        ext = np.maximum(hi - lo, cell)
-        max_cells = max(8 * n, 64)
-        while np.prod(np.ceil(ext / cell) + 1) > max_cells:
-            cell *= 1.26
-        dims = (np.ceil(ext / cell) + 1).astype(np.int64)
-        nx, ny, nz = int(dims[0]), int(dims[1]), int(dims[2])
-        cell_of = np.empty(n, np.int64)
-        cell_start, cell_list = self._K.cell_sort(x, self._is_large, lo, 1.0 / cell, nx, ny, nz,
-                                                  cell_of)
-        counts = np.empty(n, np.int64)
-        buf = np.empty((n, NEIGHBOUR_BUFFER), np.int32)
-        self._K.scan_neighbours(x, p.radius, self._is_large, self._large_idx, cell_start,
-                                cell_list, cell_of, nx, ny, nz, self.skin, buf, counts)
-        row_start = np.zeros(n + 1, np.int64)
-        np.cumsum(counts, out=row_start[1:])
-        m = int(row_start[-1])
-        nbr = np.empty(m, np.int32)
-        if int(counts.max()) <= NEIGHBOUR_BUFFER:
-            self._K.compact_neighbours(buf, row_start, nbr)
-        else:  # a crowded row: second exact pass
-            self._K.fill_neighbours(x, p.radius, self._is_large, self._large_idx, cell_start,
-                                    cell_list, cell_of, nx, ny, nz, self.skin, row_start, nbr)
-        del buf
-        hf = np.empty((m, self._ncol))
-        hi = np.empty((m, self._nicol), np.int32)
-        self._K.transfer_history(self._row_start, self._nbr, row_start, nbr, self._hf, hf,
-                                 self._hi, hi)
+        K_ = self._K
+        rs, ts = self._row_start, self._t_start
+        hf, hi = self._hf_buf, self._hi_buf
+        # 1. pairs that carry history -> store (row starts in t_start)
+        K_.count_history(rs, hf, hi, ts[1:])
+        ts[0] = 0
+        a = int(K_.prefix_sum(ts))
+        if a > self._s_j.shape[0]:
+            cap = int(L.grow(a))
+            self._s_j = np.empty(cap, np.int32)
+            self._s_f = np.empty((cap, hf.shape[1]))
+            self._s_i = np.empty((cap, hi.shape[1]), np.int32)
+        K_.save_history(rs, self._nbr_buf, hf, hi, ts, self._s_j, self._s_f, self._s_i)
+        # 2. cells
+        lo, hi_ = K_.bounds(x, self._is_large)
+        cell, nx, ny, nz = L.grid_dims(lo, hi_, 2.0 * self._r_small + self.skin, n)
+        if self._cell_start.shape[0] < nx * ny * nz + 2:
+            self._cell_start = np.empty(int(L.grow(nx * ny * nz + 2)), np.int64)
+        K_.cell_sort_into(x, self._is_large, lo, 1.0 / cell, nx, ny, nz, self._cell_of,
+                          self._cell_start, self._cell_list)
+        # 3. scan
+        buf = self._nbuf
+        K_.scan_neighbours(x, p.radius, self._is_large, self._large_idx, self._cell_start,
+                           self._cell_list, self._cell_of, nx, ny, nz, self.skin, buf, rs[1:])
+        rs[0] = 0
+        width = int(L.buffer_width(rs[1:], buf.shape[1]))
+        m = int(K_.prefix_sum(rs))
+        if m > self._nbr_buf.shape[0]:
+            cap = int(L.grow(m))
+            self._nbr_buf = np.empty(cap, np.int32)
+            self._hf_buf = np.empty((cap, hf.shape[1]))
+            self._hi_buf = np.empty((cap, hi.shape[1]), np.int32)
+            self._tp_buf = np.empty(cap, np.int32)
+            if self._has_rot:
+                self._tq_buf = np.empty((cap, 6))
+        self._m = m
+        # 4. rows
+        K_.place_neighbours(x, p.radius, self._is_large, self._large_idx, self._cell_start,
+                            self._cell_list, self._cell_of, nx, ny, nz, self.skin, buf, rs,
+                            self._nbr_buf)
+        if width != buf.shape[1]:
+            self._nbuf = np.empty((n, width), np.int32)
+        # 5. history
+        K_.restore_history(ts, self._s_j, self._s_f, self._s_i, rs, self._nbr_buf,
+                           self._hf_buf, self._hi_buf)
         if self._has_coh:
-            self.bonds_lost_to_skin += self._K.lost_bonds(self._row_start, self._nbr, row_start,
-                                                          nbr,
-                                                    self._hi)
-        self._row_start = row_start
-        self._nbr = nbr
-        self._hf = hf
-        self._hi = hi
-        self._tq = np.zeros((m if self._has_rot else 0, 6))
-        self._t_start, self._t_pair = self._K.transpose(row_start, nbr, n)
+            self.bonds_lost_to_skin += int(K_.lost_bonds(ts, self._s_j, self._s_i, rs,
+                                                         self._nbr_buf))
+        if self._has_rot:
+            self._tq_buf[:m] = 0.0
+        # 6. transposed list
+        K_.transpose_into(rs, self._nbr_buf, ts, self._tp_buf, self._cell_of)
         self._x_ref[:] = x
         self.n_builds += 1
 
@@ -403,13 +470,12 @@ class Simulation:
         p = self.particles
         n = p.n
         na = self._n_analytic
-        counts = self._counts_b
+        start = self._b_start
         sl = slice(0, na)
         self._K.analytic_contacts_count(p.x, p.radius, self._etype[sl], self._ep, self._en,
-                                  self._er[sl], self._ea0, self._ea1, counts)
-        start = np.zeros(n + 1, np.int64)
-        np.cumsum(counts, out=start[1:])
-        nc = int(start[-1])
+                                        self._er[sl], self._ea0, self._ea1, start[1:])
+        start[0] = 0
+        nc = int(self._K.prefix_sum(start))
         c_p = np.empty(nc, np.int64)
         c_e = np.empty(nc, np.int64)
         c_n = np.empty((nc, 3))
@@ -498,16 +564,19 @@ class Simulation:
             n, self.dt, p.x, p.v, p.w, p.f, p.t, p.radius, p.mass, p.inv_mass, p.inv_inertia,
             p.material, self._mat, self.gravity, self.global_damping, self._e_glob, self._e_fric,
             self._e_visc, self._e_bond, self._x_ref, self.skin, self._is_large, self._large_idx,
-            self._r_small, NEIGHBOUR_BUFFER, self._row_start, self._nbr, self._hf, self._hi,
-            self._tq, self._t_start, self._t_pair, self._n_analytic, self._etype, self._ebody,
+            self._r_small, self._row_start, self._t_start, self._nbr_buf, self._hf_buf,
+            self._hi_buf, self._tq_buf, self._tp_buf, self._s_j, self._s_f, self._s_i,
+            self._cell_of, self._cell_start, self._cell_list, self._nbuf, self._b_start, self._m,
+            self._n_analytic, self._etype, self._ebody,
             self._ep_body, self._en_body, self._er, self._ea0, self._ea1, self._ep, self._en,
             self._key_mult, self._b_mat, moving, self._b_pos, self._b_rot, self._b_vel,
             self._b_omg, self._b_refb, self._b_ref, b_force, b_torque, b_power, self._b_diss,
             b_imp, b_aimp, b_work, self._bkey, self._bhist, self._c_p, self._c_e, self._c_n,
             self._c_d, self._c_pt, self._has_rot, self._has_coh, self._has_roll, self._has_visc)
-        (self._row_start, self._nbr, self._hf, self._hi, self._tq, self._t_start, self._t_pair,
-         self._bkey, self._bhist, self._c_p, self._c_e, self._c_n, self._c_d, self._c_pt,
-         nbuild, lost) = out
+        (self._nbr_buf, self._hf_buf, self._hi_buf, self._tq_buf, self._tp_buf, self._s_j,
+         self._s_f, self._s_i, self._cell_start, self._nbuf, m, self._bkey, self._bhist,
+         self._c_p, self._c_e, self._c_n, self._c_d, self._c_pt, nbuild, lost) = out
+        self._m = int(m)
         self.n_builds += int(nbuild)
         self.bonds_lost_to_skin += int(lost)
         for k, b in enumerate(bodies):
@@ -738,20 +807,40 @@ class Simulation:
         return int(np.count_nonzero(touching)) + int(self._c_p.shape[0])
 
     def memory_bytes(self) -> dict:
-        """Memory held by the engine's arrays [bytes] (per-particle and per-pair parts)."""
+        """Memory held by the engine's arrays [bytes], buffers counted at their capacity.
+
+        Returns
+        -------
+        dict
+            ``particles`` (per-particle state and ledgers), ``pairs`` (neighbour list, history,
+            transposed list: capacity), ``scratch`` (rebuild store of the pairs that carry
+            history, cell grid, scan buffer, boundary scratch), ``boundary`` (boundary
+            contacts), ``total``, ``per_particle`` (total / N), ``pairs_per_particle``
+            (live pairs / N), ``pair_capacity``.
+
+        Notes
+        -----
+        A rebuild allocates nothing while the capacities suffice, so ``total`` is the engine's
+        peak: peak RSS = interpreter/Numba baseline + ``total`` + allocator slack
+        (docs/performance.md).
+        """
         p = self.particles
         per_particle = p.nbytes() + sum(
             a.nbytes for a in (self._x_ref, self._row_start, self._t_start, self._e_fric,
-                               self._e_visc, self._e_glob, self._e_bond, self._counts_b,
-                               self._is_large)
+                               self._e_visc, self._e_glob, self._e_bond, self._is_large)
         )
-        per_pair = sum(a.nbytes for a in (self._nbr, self._hf, self._hi, self._tq, self._t_pair))
+        per_pair = sum(a.nbytes for a in (self._nbr_buf, self._hf_buf, self._hi_buf,
+                                          self._tq_buf, self._tp_buf))
+        scratch = sum(a.nbytes for a in (self._s_j, self._s_f, self._s_i, self._cell_of,
+                                         self._cell_start, self._cell_list, self._nbuf,
+                                         self._b_start))
         boundary = sum(a.nbytes for a in (self._bkey, self._bhist, self._c_p, self._c_e,
                                           self._c_n, self._c_d, self._c_pt))
-        total = per_particle + per_pair + boundary
-        return {"particles": per_particle, "pairs": per_pair, "boundary": boundary,
-                "total": total, "per_particle": total / max(p.n, 1),
-                "pairs_per_particle": self._nbr.shape[0] / max(p.n, 1)}
+        total = per_particle + per_pair + scratch + boundary
+        return {"particles": per_particle, "pairs": per_pair, "scratch": scratch,
+                "boundary": boundary, "total": total, "per_particle": total / max(p.n, 1),
+                "pairs_per_particle": self._m / max(p.n, 1),
+                "pair_capacity": int(self._nbr_buf.shape[0])}
 
     # ------------------------------------------------------------------------------------------
     # restart

@@ -18,6 +18,11 @@ Usage::
     python validation/bench_dem.py --quick                # ~4,000 particles, seconds
     python validation/bench_dem.py                        # 50,000 particles, 1 and 2 threads
     python validation/bench_dem.py --sizes 50000,200000   # both sizes
+    python validation/bench_dem.py --sizes 200000 --yade-steps 200000:120   # Yade: rate only
+
+Memory per particle: net = (peak RSS of the impact phase - baseline) / N, the baseline being
+the worker's RSS after imports and JIT warm-up, before the scene exists; gross = peak / N;
+engine = ``Simulation.memory_bytes()["total"]`` / N (docs/performance.md).
 
 Prints a table; the LAST line is a JSON object (headline: 50k, equal threads; all runs in
 ``runs``).
@@ -112,6 +117,16 @@ def _rss_mb(key: str = "VmHWM") -> float:
     return float("nan")
 
 
+def _reset_peak_rss() -> bool:
+    """Reset this process's VmHWM to its current RSS (Linux ``clear_refs`` value 5)."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+        return True
+    except OSError:
+        return False
+
+
 # ---------------------------------------------------------------------------------------------
 # crashdem worker (runs in its own process)
 # ---------------------------------------------------------------------------------------------
@@ -121,7 +136,7 @@ def _impact_sim(x, r, lo, hi, start, threads):
     import soil
 
     soil_mat, wall, mass = materials()
-    parts = soil.Particles(x=x.copy(), radius=r.copy(), material=np.zeros(len(r), np.int32),
+    parts = soil.Particles(x=x, radius=r, material=np.zeros(len(r), np.int32),
                            rotation_blocked=True)
     floor_walls = soil.BoundaryBody(
         shapes=[
@@ -143,23 +158,46 @@ def _impact_sim(x, r, lo, hi, start, threads):
 
 
 def crashdem_worker(cfg: dict) -> dict:
-    """Impact phase in crashdem: warm-up (compile), then the timed steps."""
+    """Impact phase in crashdem: warm-up (compile), then the timed steps.
+
+    Memory per particle (docs/performance.md):
+
+    - baseline = RSS after the imports and the JIT warm-up on a small patch, before the scene's
+      arrays exist (interpreter + NumPy + Numba/LLVM + compiled kernels);
+    - peak = peak RSS of the impact phase (VmHWM reset after the baseline, then read after the
+      last step: scene set-up and all steps);
+    - ``bytes_per_particle`` (net) = (peak - baseline) / N, ``gross_bytes_per_particle`` =
+      peak / N, ``engine_bytes_per_particle`` = ``Simulation.memory_bytes()["total"] / N``
+      after the run (the engine's own buffers at their capacity).
+    """
+    import gc
+
+    import numba
+
     import soil  # noqa: F401  (import cost outside the timing)
 
-    data = np.load(cfg["packing_npz"])
-    x, r = data["x"], data["radius"]
     lo, hi, start = (np.array(cfg[k]) for k in ("box_lo", "box_hi", "drop_start"))
     threads = int(cfg["threads"])
     # warm-up on a small patch of the same scene: compiles (or loads) every kernel used below
-    sel = np.hypot(x[:, 0] - start[0], x[:, 1] - start[1]) < 0.8
-    sel &= x[:, 2] > start[2] - DROP_RADIUS - 0.6
-    wlo = np.array([x[sel, 0].min() - 0.1, x[sel, 1].min() - 0.1, x[sel, 2].min() - 0.1])
-    whi = np.array([x[sel, 0].max() + 0.1, x[sel, 1].max() + 0.1, start[2] + 1.0])
-    wsim, _ = _impact_sim(x[sel], r[sel], wlo, whi, start, threads)
+    with np.load(cfg["packing_npz"]) as data:
+        x, r = data["x"], data["radius"]
+        sel = np.hypot(x[:, 0] - start[0], x[:, 1] - start[1]) < 0.8
+        sel &= x[:, 2] > start[2] - DROP_RADIUS - 0.6
+        xw, rw = x[sel].copy(), r[sel].copy()
+        n = int(len(r))
+        del x, r, sel
+    wlo = np.array([xw[:, 0].min() - 0.1, xw[:, 1].min() - 0.1, xw[:, 2].min() - 0.1])
+    whi = np.array([xw[:, 0].max() + 0.1, xw[:, 1].max() + 0.1, start[2] + 1.0])
+    wsim, _ = _impact_sim(xw, rw, wlo, whi, start, threads)
     wsim.step(3)
-    del wsim
-    rss0 = _rss_mb("VmRSS")
+    del wsim, xw, rw
+    gc.collect()
+    rss_base = _rss_mb("VmRSS")
+    hwm_reset = _reset_peak_rss()
+    with np.load(cfg["packing_npz"]) as data:
+        x, r = data["x"], data["radius"]
     sim, drop = _impact_sim(x, r, lo, hi, start, threads)
+    del x, r
     m = DROP_MASS
     g = np.array([0.0, 0.0, -GRAVITY])
     pos = start.astype(float).copy()
@@ -183,18 +221,27 @@ def crashdem_worker(cfg: dict) -> dict:
         hist[k] = (sim.time, pos[2], vel[2], f[2], 0.0)
         if k % 25 == 0:
             contacts.append(_sim_contacts_len(sim))
+    peak = _rss_mb("VmHWM")
+    mem = sim.memory_bytes()
+    mib = 1024.0 * 1024.0
     out = {
         "code": "crashdem",
         "threads": threads,
-        "particles": int(len(r)),
+        "particles": n,
         "steps_timed": n_steps - 1,
         "elapsed_s": elapsed,
-        "particle_steps_per_s": len(r) * (n_steps - 1) / elapsed,
+        "particle_steps_per_s": n * (n_steps - 1) / elapsed,
         "contacts_per_step": float(np.mean(contacts)) if contacts else 0.0,
-        "peak_rss_mb": _rss_mb("VmHWM"),
-        "rss_after_warmup_mb": rss0,
-        "bytes_per_particle": (_rss_mb("VmHWM") - rss0) * 1024.0 * 1024.0 / len(r),
-        "engine_bytes_per_particle": sim.memory_bytes()["per_particle"],
+        "peak_rss_mb": peak,
+        "rss_baseline_mb": rss_base,
+        "peak_rss_reset": hwm_reset,
+        "bytes_per_particle": (peak - rss_base) * mib / n,
+        "gross_bytes_per_particle": peak * mib / n,
+        "engine_bytes_per_particle": mem["per_particle"],
+        "engine_bytes": {k: mem.get(k, 0) for k in ("particles", "pairs", "scratch",
+                                                    "boundary")},
+        "pairs_per_particle": mem["pairs_per_particle"],
+        "threading_layer": numba.threading_layer(),
         "drop_mass": m,
     }
     np.save(cfg["out"] + ".npy", hist)
@@ -248,7 +295,14 @@ def run_yade(cfg_path: Path, threads: int) -> dict:
     return json.loads(out.read_text())
 
 
-def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, log) -> list[dict]:
+def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, log,
+               yade_steps: int | None = None) -> list[dict]:
+    """Both codes at about ``n`` particles for each thread count.
+
+    ``yade_steps`` (None = all) caps Yade's steps: its rate is then measured on the first
+    ``yade_steps`` impact steps only, and the equal-results columns are left empty for this
+    size (they need the full impact).
+    """
     from soil import packing as pk
 
     spec = bench_spec(n)
@@ -262,6 +316,7 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
     np.savez(npz, x=packing.x, radius=packing.radius)
     soil_mat, wall, mass = materials()
     steps = int(round(DURATION / DT))
+    y_steps = steps if yade_steps is None else min(steps, int(yade_steps))
     runs = []
     for threads in threads_list:
         rec = {"requested_particles": n, "particles": len(packing), "threads": threads,
@@ -279,7 +334,8 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
                 "box_lo": lo.tolist(), "box_hi": hi.tolist(),
                 "drop_start": start.tolist(), "drop_radius": DROP_RADIUS,
                 "drop_velocity": [0.0, 0.0, -DROP_SPEED],
-                "gravity": GRAVITY, "dt": DT, "steps": steps, "threads": threads,
+                "gravity": GRAVITY, "dt": DT, "threads": threads,
+                "steps": steps if code == "crashdem" else y_steps,
                 "out": str(work / f"{code}_{n}_{threads}"),
             }
             cfg_path = work / f"{code}_{n}_{threads}.cfg.json"
@@ -298,15 +354,26 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
         rec["crashdem_particle_steps_per_s"] = c["particle_steps_per_s"]
         rec["peak_rss_mb"] = c["peak_rss_mb"]
         rec["crashdem_bytes_per_particle"] = c["bytes_per_particle"]
+        rec["crashdem_gross_bytes_per_particle"] = c["gross_bytes_per_particle"]
         rec["crashdem_engine_bytes_per_particle"] = c["engine_bytes_per_particle"]
+        rec["rss_baseline_mb"] = c["rss_baseline_mb"]
         if "yade" in rec:
             y = rec["yade"]
+            rec["yade_steps"] = y["steps_timed"] + 1
             rec["yade_particle_steps_per_s"] = y["particle_steps_per_s"]
             rec["ratio"] = c["particle_steps_per_s"] / y["particle_steps_per_s"]
-            rec["peak_decel_rel_diff"] = (c["peak_decel_g"] - y["peak_decel_g"]) / y["peak_decel_g"]
-            rec["max_penetration_rel_diff"] = (
-                (c["max_penetration_m"] - y["max_penetration_m"]) / y["max_penetration_m"]
-            )
+            if y_steps == steps:
+                rec["peak_decel_rel_diff"] = (
+                    (c["peak_decel_g"] - y["peak_decel_g"]) / y["peak_decel_g"])
+                rec["max_penetration_rel_diff"] = (
+                    (c["max_penetration_m"] - y["max_penetration_m"]) / y["max_penetration_m"]
+                )
+            else:  # partial Yade run: rate only
+                rec["peak_decel_rel_diff"] = None
+                rec["max_penetration_rel_diff"] = None
+                for k in ("peak_decel_g", "max_penetration_m", "t_peak_s",
+                          "t_max_penetration_s"):
+                    y[k] = None
             rec["yade_peak_rss_mb"] = y["peak_rss_mb"]
         else:
             for k in ("yade_particle_steps_per_s", "ratio", "peak_decel_rel_diff",
@@ -317,9 +384,12 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
 
 
 def table(runs: list[dict]) -> str:
+    """One line per (size, threads).  Memory columns [B/particle]: net = (peak RSS - baseline)
+    / N, gross = peak RSS / N, engine = the engine's own buffers / N (crashdem)."""
     head = (f"{'N':>8} {'thr':>3} {'contacts':>9} {'crashdem p-s/s':>15} {'yade p-s/s':>12} "
-            f"{'ratio':>6} {'cd peak g':>9} {'yade peak g':>11} {'d peak':>7} {'cd pen m':>8} "
-            f"{'yade pen m':>10} {'d pen':>7} {'cd RSS MB':>9} {'B/part':>7} {'yade RSS':>8}")
+            f"{'y steps':>7} {'ratio':>6} {'cd peak g':>9} {'yade peak g':>11} {'d peak':>7} "
+            f"{'cd pen m':>8} {'yade pen m':>10} {'d pen':>7} {'cd RSS MB':>9} {'net B/p':>7} "
+            f"{'gross B/p':>9} {'eng B/p':>7} {'yade RSS':>8}")
     lines = [head, "-" * len(head)]
     for r in runs:
         c, y = r["crashdem"], r.get("yade")
@@ -330,12 +400,16 @@ def table(runs: list[dict]) -> str:
         lines.append(
             f"{r['particles']:>8} {r['threads']:>3} {r['contacts_per_step']:>9.0f} "
             f"{c['particle_steps_per_s']:>15.3g} "
-            f"{f(y and y['particle_steps_per_s'], '12.3g'):>12} {f(r['ratio'], '6.2f'):>6} "
+            f"{f(y and y['particle_steps_per_s'], '12.3g'):>12} "
+            f"{f(r.get('yade_steps'), '7d'):>7} {f(r['ratio'], '6.2f'):>6} "
             f"{c['peak_decel_g']:>9.2f} {f(y and y['peak_decel_g'], '11.2f'):>11} "
             f"{f(r['peak_decel_rel_diff'], '+7.3f'):>7} {c['max_penetration_m']:>8.4f} "
             f"{f(y and y['max_penetration_m'], '10.4f'):>10} "
             f"{f(r['max_penetration_rel_diff'], '+7.3f'):>7} {c['peak_rss_mb']:>9.0f} "
-            f"{r['crashdem_bytes_per_particle']:>7.0f} {f(y and y['peak_rss_mb'], '8.0f'):>8}"
+            f"{r['crashdem_bytes_per_particle']:>7.0f} "
+            f"{r['crashdem_gross_bytes_per_particle']:>9.0f} "
+            f"{r['crashdem_engine_bytes_per_particle']:>7.0f} "
+            f"{f(y and y['peak_rss_mb'], '8.0f'):>8}"
         )
     return "\n".join(lines)
 
@@ -346,6 +420,8 @@ def main(argv=None) -> int:
     ap.add_argument("--threads", default="1,2", help="comma-separated thread counts")
     ap.add_argument("--quick", action="store_true", help="one small bed (about 4,000 grains)")
     ap.add_argument("--no-yade", action="store_true", help="skip Yade even if on PATH")
+    ap.add_argument("--yade-steps", default=None,
+                    help="cap Yade's steps per size, e.g. '200000:120' (rate only at that size)")
     ap.add_argument("--cache", default=str(DEFAULT_CACHE / "packings"), help="packing cache dir")
     ap.add_argument("--keep", default=None, help="directory to keep the run files in")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
@@ -362,9 +438,14 @@ def main(argv=None) -> int:
 
     work = Path(a.keep) if a.keep else Path(tempfile.mkdtemp(prefix="bench_dem_"))
     work.mkdir(parents=True, exist_ok=True)
+    yade_steps = {}
+    for item in (a.yade_steps.split(",") if a.yade_steps else []):
+        size, _, k = item.partition(":")
+        yade_steps[int(size)] = int(k)
     runs = []
     for n in sizes:
-        runs += bench_size(n, threads, Path(a.cache).expanduser(), work, use_yade, log)
+        runs += bench_size(n, threads, Path(a.cache).expanduser(), work, use_yade, log,
+                           yade_steps.get(n))
     print(table(runs))
     if not a.keep:
         shutil.rmtree(work, ignore_errors=True)
@@ -373,14 +454,18 @@ def main(argv=None) -> int:
             "yade_particle_steps_per_s", "ratio", "peak_rss_mb", "peak_decel_rel_diff",
             "max_penetration_rel_diff")
     summary = {k: key[k] for k in keys}
-    summary["crashdem_bytes_per_particle"] = key["crashdem_bytes_per_particle"]
-    summary["crashdem_engine_bytes_per_particle"] = key["crashdem_engine_bytes_per_particle"]
+    mem_keys = ("crashdem_bytes_per_particle", "crashdem_gross_bytes_per_particle",
+                "crashdem_engine_bytes_per_particle", "rss_baseline_mb")
+    for k in mem_keys:
+        summary[k] = key[k]
     summary["runs"] = [
-        {k: r[k] for k in keys + ("crashdem_bytes_per_particle",)}
+        {k: r[k] for k in keys + mem_keys}
+        | {"yade_steps": r.get("yade_steps")}
         | {f"crashdem_{m}": r["crashdem"][m] for m in ("peak_decel_g", "max_penetration_m",
                                                       "t_peak_s", "t_max_penetration_s")}
-        | ({f"yade_{m}": r["yade"][m] for m in ("peak_decel_g", "max_penetration_m", "t_peak_s",
-                                                 "t_max_penetration_s", "peak_rss_mb")}
+        | ({f"yade_{m}": r["yade"].get(m) for m in ("peak_decel_g", "max_penetration_m",
+                                                     "t_peak_s", "t_max_penetration_s",
+                                                     "peak_rss_mb")}
            if "yade" in r else {})
         for r in runs
     ]
