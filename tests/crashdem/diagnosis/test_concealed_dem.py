@@ -48,7 +48,9 @@ MIN_SCORE_AFTER = 0.85
 GAP = ("DEM truth, measured: 7/12 effect cases named (floor proximity 0/2, cohesion 0/2, "
        "sensor 1/2 missed), layering depth 28-31 % short (about one grain radius at r = 0.10 m), "
        "final scores 0.75-0.94, capped near the 0.82-0.89 that two DEM packings of the same "
-       "physics score against each other; see docs/diagnosis.md 'Validation on DEM truth'")
+       "physics score against each other; a depth-indexed anchor, the floor factor on the drag "
+       "term and a free floor stiffening did not name floor or cohesion (2026-11-22); see "
+       "docs/diagnosis.md 'Validation on DEM truth' and 'Limitations'")
 
 
 @pytest.fixture(scope="session")

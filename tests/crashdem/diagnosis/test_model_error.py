@@ -83,3 +83,44 @@ def test_discrepancy_anchor_is_exact_on_the_baseline():
     np.testing.assert_allclose((rom["accel_z"].data + d.data)[inside],
                                np.interp(t[inside], tb, base["accel_z"].data), atol=1e-9)
     assert np.all(d.data[t < tb[0]] == 0.0)
+
+
+def _loading_unloading(t, t_stop, z_max):
+    """Tip depth that rises from 0 at t = 0 to z_max at t_stop (sine quarter), then recedes."""
+    z = np.where(t <= 0.0, 0.0, z_max * np.sin(0.5 * math.pi * np.clip(t / t_stop, 0.0, 1.0)))
+    after = t > t_stop
+    z[after] = z_max - 0.5 * (t[after] - t_stop)
+    return z
+
+
+def test_depth_index_is_the_identity_on_the_calibrated_run():
+    """The depth-indexed anchor gives back the time itself when the hypothesis run is the
+    calibrated run (the anchor then reproduces the baseline exactly, as the time anchor)."""
+    t = np.arange(-0.02, 0.15, 1.0 / FS)
+    z = _loading_unloading(t, 0.10, 0.5)
+    np.testing.assert_allclose(dg._depth_index(t, z, z), t, atol=1e-12)
+
+
+def test_depth_index_maps_equal_depths_and_continues_after_the_stop():
+    """Oracle: a hypothesis run that goes through the same depths s times faster (z_h(t) =
+    z_c(s t)) is indexed at s t while it penetrates; after its own deepest point it advances
+    with time from there (tau = t_stop_c + (t - t_stop_c / s)); deeper than the calibrated run
+    it continues in time from the calibrated run's deepest point; before contact tau = t."""
+    t = np.arange(-0.02, 0.15, 0.2 / FS)
+    s, t_c = 1.6, 0.10
+    zc = _loading_unloading(t, t_c, 0.5)
+    zh = _loading_unloading(t * s, t_c, 0.5)
+    tau = dg._depth_index(t, zh, zc)
+    load = (t > 0.002) & (t <= t_c / s - 0.002)
+    np.testing.assert_allclose(tau[load], s * t[load], atol=2e-4)  # interpolation of the sine
+    i_h = int(np.argmax(zh))
+    after = t > t[i_h] + 0.001
+    np.testing.assert_allclose(tau[after], tau[i_h] + t[after] - t[i_h], atol=1e-12)
+    assert abs(tau[i_h] - t_c) < 2e-3
+    assert np.all(tau[t <= 0.0] == t[t <= 0.0])
+    # deeper than the calibrated run: continues in time from its deepest point
+    zd = _loading_unloading(t, 0.12, 0.6)
+    tau_d = dg._depth_index(t, zd, zc)
+    first = int(np.argmax(zd > 0.5))
+    deeper = (zd > 0.5) & (np.arange(t.size) <= int(np.argmax(zd)))
+    np.testing.assert_allclose(tau_d[deeper], t_c + (t[deeper] - t[first]), atol=2e-4)
