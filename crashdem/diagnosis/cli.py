@@ -74,16 +74,49 @@ def rom_from_scenario(scen) -> RomParams:
     return RomParams(**vals)
 
 
+def _si_unit(unit: str | None) -> str | None:
+    from crashdem.signal import UNIT_TO_SI
+
+    return UNIT_TO_SI.get(unit, (None, None))[1] if unit else None
+
+
+def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
+    """The recorded channel standing for ``model`` (``accel_z`` / ``velocity_z``) when the
+    recording does not use crashdem's names: crashdem's impactor channel, an ISO/TS 13499 code
+    (dimension ``AC``/``VE``, direction ``Z``), or the one channel with the right SI unit whose
+    name says z. None when nothing or more than one channel qualifies."""
+    si, iso = ("m/s^2", "AC") if model == ACCEL else ("m/s", "VE")
+    alt = SIM_CHANNELS.get(model)
+    if alt in rec:
+        return alt
+    iso_hits = [n for n in rec if len(n) == 16 and n[12:14].upper() == iso
+                and n[14].upper() == "Z"]
+    if len(iso_hits) == 1:
+        return iso_hits[0]
+    unit_hits = [n for n, sig in rec.items() if _si_unit(sig.unit) == si]
+    if len(unit_hits) == 1:
+        return unit_hits[0]
+    z_hits = [n for n in unit_hits if n.lower().rstrip("_0123456789").endswith("z")]
+    return z_hits[0] if len(z_hits) == 1 else None
+
+
 def _channel_map(specs: list[str] | None, rec: dict[str, Signal]) -> dict[str, str]:
-    """recorded name -> ROM channel name."""
+    """recorded name -> ROM channel name.
+
+    Without ``--channel``: the channels named ``accel_z`` / ``velocity_z``; else, for each of
+    the two, crashdem's impactor channel, a unique ISO-MME code or a unique channel with the
+    right unit (see ``_auto_channel``)."""
     out: dict[str, str] = {}
     if not specs:
-        for name in rec:
-            if name in (ACCEL, VELOCITY):
-                out[name] = name
+        for model in (ACCEL, VELOCITY):
+            name = model if model in rec else _auto_channel(rec, model)
+            if name is not None and name not in out:
+                out[name] = model
         if not out:
-            raise ValueError(f"diagnose: no recorded channel named {ACCEL!r} or {VELOCITY!r}; "
-                             f"recorded: {sorted(rec)}; map one with --channel NAME:{ACCEL}")
+            raise ValueError(f"diagnose: no recorded channel found for {ACCEL!r} (an acceleration "
+                             f"along z) or {VELOCITY!r}; recorded: {sorted(rec)} with units "
+                             f"{[rec[n].unit for n in sorted(rec)]}; map one with "
+                             f"--channel NAME:{ACCEL}")
         return out
     for spec in specs:
         name, _, rom_name = spec.partition(":")

@@ -97,3 +97,29 @@ def test_recording_units_do_not_matter(layering_case):
     for k, v in layering_case.values.items():
         assert abs(h["parameters"][k] / v - 1.0) < 0.15
     assert "adds the missing peak" in h["evidence"] or "removes" in h["evidence"]
+
+
+def test_channel_map_finds_channels_of_other_codes():
+    """Recordings from other codes name their channels differently: crashdem's impactor names,
+    ISO/TS 13499 codes (dimension AC/VE, direction Z) and a unique channel of the right unit are
+    matched to the model channels; ambiguity or no match is an error naming what was recorded."""
+    from crashdem.diagnosis.cli import _channel_map
+    from crashdem.signal import Signal
+
+    t = np.linspace(0.0, 0.1, 11)
+
+    def s(unit):
+        return Signal("x", t, np.zeros_like(t), unit, None, {})
+
+    assert _channel_map(None, {"acc": s("g"), "vel": s("m/s"), "F": s("kN")}) == {
+        "acc": "accel_z", "vel": "velocity_z"}
+    assert _channel_map(None, {"10HEAD0000CGACZD": s("g"), "10HEAD0000CGACXD": s("g"),
+                               "10HEAD0000CGVEZD": s("m/s")}) == {
+        "10HEAD0000CGACZD": "accel_z", "10HEAD0000CGVEZD": "velocity_z"}
+    assert _channel_map(None, {"drop_mass_accel_z": s("m/s^2"),
+                               "drop_mass_accel_x": s("m/s^2")}) == {"drop_mass_accel_z": "accel_z"}
+    assert _channel_map(None, {"ax": s("g"), "az": s("g")}) == {"az": "accel_z"}
+    with pytest.raises(ValueError, match="no recorded channel found.*Pa"):
+        _channel_map(None, {"p": s("Pa")})
+    with pytest.raises(ValueError, match="a1"):
+        _channel_map(None, {"a1": s("g"), "a2": s("g")})
