@@ -46,7 +46,7 @@ import exudyn.itemInterface as eii
 import numpy as np
 from exudyn.utilities import RigidBodyInertia
 
-from .exudyn_model import TIME_MATCH_RTOL, BodyState, _vec3
+from .exudyn_model import TIME_MATCH_RTOL, BodyState, _RigidBodyReadout, _vec3
 from .spec import RigidBodySpec
 
 #: penalty natural frequency times the integration step [-]: RK44 is stable up to 2.8 and
@@ -98,7 +98,7 @@ def _vee_small(a: np.ndarray) -> np.ndarray:
     return w * th / math.sin(th)
 
 
-class ExudynCrushableBody:
+class ExudynCrushableBody(_RigidBodyReadout):
     """The aircraft (rear body) and its crushable nose in one Exudyn system.
 
     Parameters
@@ -356,38 +356,12 @@ class ExudynCrushableBody:
 
     # ------------------------------------------------------------------ state
     @property
-    def time(self) -> float:
-        """Model clock [s]."""
-        return self._time
-
-    @property
-    def mass(self) -> float:
-        """Rear body mass [kg]."""
-        return self.spec.mass
-
-    @property
     def total_mass(self) -> float:
         """Rear + nose mass [kg]."""
         return self.spec.mass + self.nose_spec.mass
 
     def _out(self, node, var):
         return np.asarray(self._mbs.GetNodeOutput(node, var))
-
-    def position(self) -> np.ndarray:
-        """Rear CG position [m]."""
-        return self._out(self._node, exu.OutputVariableType.Position)
-
-    def velocity(self) -> np.ndarray:
-        """Rear CG velocity [m/s]."""
-        return self._out(self._node, exu.OutputVariableType.Velocity)
-
-    def rotation(self) -> np.ndarray:
-        """Rear rotation matrix body -> world."""
-        return self._out(self._node, exu.OutputVariableType.RotationMatrix).reshape(3, 3)
-
-    def angular_velocity(self) -> np.ndarray:
-        """Rear angular velocity, world [rad/s]."""
-        return self._out(self._node, exu.OutputVariableType.AngularVelocity)
 
     def nose_position(self) -> np.ndarray:
         """Nose CG position [m]."""
@@ -404,23 +378,6 @@ class ExudynCrushableBody:
     def nose_angular_velocity(self) -> np.ndarray:
         """Nose angular velocity, world [rad/s]."""
         return self._out(self._nnode, exu.OutputVariableType.AngularVelocity)
-
-    @property
-    def applied_force(self) -> np.ndarray:
-        return self._force.copy()
-
-    @property
-    def applied_torque(self) -> np.ndarray:
-        return self._torque.copy()
-
-    def inertia_world(self, rotation=None) -> np.ndarray:
-        """Rear inertia about its CG in world axes [kg m^2]."""
-        r = self.rotation() if rotation is None else rotation
-        return r @ self.spec.inertia @ r.T
-
-    def weight(self) -> np.ndarray:
-        """Rear body weight [N]."""
-        return self.spec.mass * self.gravity
 
     def state(self) -> BodyState:
         """Rear body state; accelerations from the last :meth:`apply` load (which includes

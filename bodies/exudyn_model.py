@@ -52,7 +52,61 @@ def _vec3(x, name):
     return a
 
 
-class ExudynRigidBody:
+class _RigidBodyReadout:
+    """The read-out of one Exudyn rigid-body node shared by :class:`ExudynRigidBody` and the
+    rear body of ``bodies.crush.ExudynCrushableBody``. Needs ``_mbs``, ``_node``, ``spec``,
+    ``gravity``, ``_force``, ``_torque`` and ``_time`` on the instance."""
+
+    # ------------------------------------------------------------------ state
+    @property
+    def time(self) -> float:
+        """Model clock [s]."""
+        return self._time
+
+    @property
+    def mass(self) -> float:
+        """Body mass [kg]."""
+        return self.spec.mass
+
+    @property
+    def applied_force(self) -> np.ndarray:
+        """Force currently applied through :meth:`apply` [N]."""
+        return self._force.copy()
+
+    @property
+    def applied_torque(self) -> np.ndarray:
+        """Torque currently applied through :meth:`apply` [N m]."""
+        return self._torque.copy()
+
+    def inertia_world(self, rotation=None) -> np.ndarray:
+        """Inertia about the CG in world axes, ``R J R^T`` [kg m^2]."""
+        r = self.rotation() if rotation is None else rotation
+        return r @ self.spec.inertia @ r.T
+
+    def position(self) -> np.ndarray:
+        """CG position [m]."""
+        return np.asarray(self._mbs.GetNodeOutput(self._node, exu.OutputVariableType.Position))
+
+    def velocity(self) -> np.ndarray:
+        """CG velocity [m/s]."""
+        return np.asarray(self._mbs.GetNodeOutput(self._node, exu.OutputVariableType.Velocity))
+
+    def rotation(self) -> np.ndarray:
+        """Rotation matrix body -> world."""
+        return np.asarray(self._mbs.GetNodeOutput(
+            self._node, exu.OutputVariableType.RotationMatrix)).reshape(3, 3)
+
+    def angular_velocity(self) -> np.ndarray:
+        """Angular velocity in the world frame [rad/s]."""
+        return np.asarray(self._mbs.GetNodeOutput(
+            self._node, exu.OutputVariableType.AngularVelocity))
+
+    def weight(self) -> np.ndarray:
+        """Body weight ``m g`` [N]."""
+        return self.spec.mass * self.gravity
+
+
+class ExudynRigidBody(_RigidBodyReadout):
     """One free rigid body in Exudyn, advanced step by step under a held force and torque.
 
     Parameters
@@ -217,54 +271,6 @@ class ExudynRigidBody:
         self._exu_time += h
         self._time = self._time + h
         self.n_advances += 1
-
-    # ------------------------------------------------------------------ state
-    @property
-    def time(self) -> float:
-        """Model clock [s]."""
-        return self._time
-
-    @property
-    def mass(self) -> float:
-        """Body mass [kg]."""
-        return self.spec.mass
-
-    @property
-    def applied_force(self) -> np.ndarray:
-        """Force currently applied through :meth:`apply` [N]."""
-        return self._force.copy()
-
-    @property
-    def applied_torque(self) -> np.ndarray:
-        """Torque currently applied through :meth:`apply` [N m]."""
-        return self._torque.copy()
-
-    def inertia_world(self, rotation=None) -> np.ndarray:
-        """Inertia about the CG in world axes, ``R J R^T`` [kg m^2]."""
-        r = self.rotation() if rotation is None else rotation
-        return r @ self.spec.inertia @ r.T
-
-    def position(self) -> np.ndarray:
-        """CG position [m]."""
-        return np.asarray(self._mbs.GetNodeOutput(self._node, exu.OutputVariableType.Position))
-
-    def velocity(self) -> np.ndarray:
-        """CG velocity [m/s]."""
-        return np.asarray(self._mbs.GetNodeOutput(self._node, exu.OutputVariableType.Velocity))
-
-    def rotation(self) -> np.ndarray:
-        """Rotation matrix body -> world."""
-        return np.asarray(self._mbs.GetNodeOutput(
-            self._node, exu.OutputVariableType.RotationMatrix)).reshape(3, 3)
-
-    def angular_velocity(self) -> np.ndarray:
-        """Angular velocity in the world frame [rad/s]."""
-        return np.asarray(self._mbs.GetNodeOutput(
-            self._node, exu.OutputVariableType.AngularVelocity))
-
-    def weight(self) -> np.ndarray:
-        """Body weight ``m g`` [N]."""
-        return self.spec.mass * self.gravity
 
     def state(self) -> BodyState:
         """Position, rotation, velocity, angular velocity, accelerations and time.

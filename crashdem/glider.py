@@ -813,13 +813,7 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
 
     # sensors: accelerometers (250 g, failure factor), gyro, pitch, CG kinematics, walls
     fs_g = scen["instrumentation.accel_full_scale_g"] * G0
-    cfc = scen["instrumentation.cfc"]
-    dyn = None
-    if scen["physics.sensor_dynamics.enabled"]:
-        dyn = sn.MountDynamics(scen["physics.sensor_dynamics.natural_frequency"],
-                               scen["physics.sensor_dynamics.damping_ratio"])
-        if scen["physics.sensor_dynamics.cfc"] is not None:
-            cfc = scen["physics.sensor_dynamics.cfc"]
+    cfc, dyn = rn.sensor_dynamics(scen)
     out = sn.sensors_for_body(rear.sensors, "glider", cfc=cfc, accel_full_scale=fs_g,
                               failure_factor=scen["instrumentation.accel_failure_factor"],
                               dynamics=dyn)

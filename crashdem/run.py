@@ -200,10 +200,12 @@ def _impactor_spec(scen: Scenario):
         "this version; allowed now: 'drop_sphere'")
 
 
-def _sensor_set(scen: Scenario, spec, floor_name: str, body_name: str):
+def sensor_dynamics(scen: Scenario):
+    """``(cfc, dynamics)`` of the accelerometer channels: the instrumentation CFC and no mount
+    model, unless ``physics.sensor_dynamics`` is on (then its ``MountDynamics`` and, when given,
+    its CFC class)."""
     from crashdem import sensors as sn
 
-    fs = scen["instrumentation.sample_rate"]
     cfc = scen["instrumentation.cfc"]
     dyn = None
     if scen["physics.sensor_dynamics.enabled"]:
@@ -211,6 +213,14 @@ def _sensor_set(scen: Scenario, spec, floor_name: str, body_name: str):
                                scen["physics.sensor_dynamics.damping_ratio"])
         if scen["physics.sensor_dynamics.cfc"] is not None:
             cfc = scen["physics.sensor_dynamics.cfc"]
+    return cfc, dyn
+
+
+def _sensor_set(scen: Scenario, spec, floor_name: str, body_name: str):
+    from crashdem import sensors as sn
+
+    fs = scen["instrumentation.sample_rate"]
+    cfc, dyn = sensor_dynamics(scen)
     fs_g = scen["instrumentation.accel_full_scale_g"] * 9.80665
     out = []
     for m in spec.sensors:
