@@ -91,6 +91,23 @@ E_FACET = 3
 # ----------------------------------------------------------------------------------------------
 # integration
 # ----------------------------------------------------------------------------------------------
+@numba.njit(cache=True, inline="always")
+def _cundall_damped(fk, vk, inv_m, dt, damping, e_glob, i):
+    """One component of a force (or torque) under Cundall non-viscous damping: ``fk`` reduced
+    (increased) by ``damping |fk|`` when it drives (opposes) the mid-step velocity
+    ``vk + dt fk inv_m / 2``; the dissipated work ``damping |fk v_mid| dt`` goes to
+    ``e_glob[i]``."""
+    vm = vk + 0.5 * dt * fk * inv_m
+    s = fk * vm
+    if s > 0.0:
+        e_glob[i] += damping * abs(fk * vm) * dt
+        return fk * (1.0 - damping)
+    if s < 0.0:
+        e_glob[i] += damping * abs(fk * vm) * dt
+        return fk * (1.0 + damping)
+    return fk
+
+
 @pjit
 def integrate(x, v, w, f, t, inv_mass, inv_inertia, dt, damping, e_glob, x_ref, half_skin2,
               has_rot):
@@ -110,14 +127,7 @@ def integrate(x, v, w, f, t, inv_mass, inv_inertia, dt, damping, e_glob, x_ref, 
         for k in range(3):
             fk = f[i, k]
             if damping > 0.0:
-                vm = v[i, k] + 0.5 * dt * fk * im
-                s = fk * vm
-                if s > 0.0:
-                    fk = fk * (1.0 - damping)
-                    e_glob[i] += damping * abs(f[i, k] * vm) * dt
-                elif s < 0.0:
-                    fk = fk * (1.0 + damping)
-                    e_glob[i] += damping * abs(f[i, k] * vm) * dt
+                fk = _cundall_damped(fk, v[i, k], im, dt, damping, e_glob, i)
             v[i, k] += dt * fk * im
             x[i, k] += dt * v[i, k]
         if has_rot:
@@ -126,14 +136,7 @@ def integrate(x, v, w, f, t, inv_mass, inv_inertia, dt, damping, e_glob, x_ref, 
                 for k in range(3):
                     tk = t[i, k]
                     if damping > 0.0:
-                        wm = w[i, k] + 0.5 * dt * tk * ii
-                        s = tk * wm
-                        if s > 0.0:
-                            tk = tk * (1.0 - damping)
-                            e_glob[i] += damping * abs(t[i, k] * wm) * dt
-                        elif s < 0.0:
-                            tk = tk * (1.0 + damping)
-                            e_glob[i] += damping * abs(t[i, k] * wm) * dt
+                        tk = _cundall_damped(tk, w[i, k], ii, dt, damping, e_glob, i)
                     w[i, k] += dt * tk * ii
         dx = x[i, 0] - x_ref[i, 0]
         dy = x[i, 1] - x_ref[i, 1]
