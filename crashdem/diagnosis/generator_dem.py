@@ -37,6 +37,7 @@ factor) and the contact restitution (the ROM's is a bulk soil-spring dashpot).
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import math
@@ -158,7 +159,10 @@ _CODE = ("soil", "bodies", "coupling", "crashdem/run.py", "crashdem/sensors.py",
          "crashdem/scenario.py", "crashdem/filters.py")
 
 
+@functools.lru_cache(maxsize=1)
 def _code_fingerprint() -> bytes:
+    """Hash of the simulation sources (read once per process: the imported code cannot change
+    under a running process)."""
     h = hashlib.sha256()
     for rel in _CODE:
         p = _ROOT / rel
