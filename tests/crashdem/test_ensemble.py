@@ -227,14 +227,11 @@ def test_member_that_always_kills_its_worker_is_recorded_failed(tmp_path, base):
     the other members are intact (oracle: analytic pulses)."""
     spec = en.SweepSpec({"soil.material.young": [1e7, 2e7],
                          "soil.material.friction_angle_deg": [30.0]})
-    settings = en.ClusterSettings(n_workers=1, allowed_failures=0)
-    # one task on the worker at a time (the default saturation 1.1 sends two to a one-thread
-    # worker, and then the innocent member queued there witnesses the death too and, with
-    # allowed_failures=0, is lost with it: the outcome would depend on timing)
-    import dask
-
-    with dask.config.set({"distributed.scheduler.worker-saturation": 1.0}):
-        path = en.sweep(base, spec, tmp_path / "oom.h5", AlwaysKillingMember(1), settings)
+    # one worker per member: a member queued on the worker that dies also "witnesses" the death
+    # and, with allowed_failures=0, would be lost with it (seen with one shared worker; the
+    # scheduler sends independent tasks to a worker regardless of worker-saturation)
+    settings = en.ClusterSettings(n_workers=2, allowed_failures=0)
+    path = en.sweep(base, spec, tmp_path / "oom.h5", AlwaysKillingMember(1), settings)
     with en.open_ensemble(path) as ens:
         recs = ens.members()
         assert ens.status == "complete"
