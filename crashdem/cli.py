@@ -124,8 +124,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--set", action="append", metavar="KEY=VALUE")
     d.add_argument("--full-confirm", type=int, default=None,
                    help="confirm the top hypotheses with this many full DEM runs at most "
-                        "(in parallel on Dask: a LocalCluster, or --scheduler; --workers 0 "
-                        "runs them in this process)")
+                        "(default 3 with a full-simulation baseline: the recalibrated run and "
+                        "the two best candidates; 0 = screening only; in parallel on Dask: a "
+                        "LocalCluster, or --scheduler; --workers 0 runs them in this process)")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

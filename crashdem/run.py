@@ -210,7 +210,8 @@ def sensor_dynamics(scen: Scenario):
     dyn = None
     if scen["physics.sensor_dynamics.enabled"]:
         dyn = sn.MountDynamics(scen["physics.sensor_dynamics.natural_frequency"],
-                               scen["physics.sensor_dynamics.damping_ratio"])
+                               scen["physics.sensor_dynamics.damping_ratio"],
+                               scen["physics.sensor_dynamics.model"])
         if scen["physics.sensor_dynamics.cfc"] is not None:
             cfc = scen["physics.sensor_dynamics.cfc"]
     return cfc, dyn

@@ -237,6 +237,7 @@ SCHEMA: dict[str, Any] = {
             "enabled": B(False, doc="accelerometer-mount resonance or a different filter class"),
             "natural_frequency": F(400.0, "Hz", 1, 20000, doc="mount resonance"),
             "damping_ratio": F(0.05, "1", 0, 2, doc="mount damping ratio"),
+            "model": C("lowpass", "lowpass", "mount", doc="'lowpass': seismic transducer wn^2/(s^2+2 zeta wn s+wn^2); 'mount': base-excitation transmissibility of a resonant mount (2 zeta wn s+wn^2)/(s^2+2 zeta wn s+wn^2)"),
             "cfc": F(None, "Hz", 1, 10000, doc="filter class actually used (null = instrumentation.cfc)", nullable=True),
         },
         "structural_crush": {

@@ -97,8 +97,9 @@ scale. With ``failure_factor = X`` the channel is marked failed at the first DEM
 sample whose support extends past the last DEM instant before the failure is NaN, and the Signal
 carries ``meta["failed_at"]`` [s] and ``meta["valid_until"]`` [s].
 
-Mount dynamics: ``y'' + 2 zeta wn y' + wn^2 y = wn^2 u`` (seismic transducer / resonant mount,
-unit static gain), integrated exactly for a piecewise-linear input (first-order-hold
+Mount dynamics: ``y'' + 2 zeta wn y' + wn^2 y = wn^2 u`` (``model="lowpass"``, seismic
+transducer) or ``... = 2 zeta wn u' + wn^2 u`` (``model="mount"``, transmissibility of a resonant
+mount), unit static gain, integrated exactly for a piecewise-linear input (first-order-hold
 discretisation by the matrix exponential of the augmented system), started at rest in static
 equilibrium with the first input value.
 
@@ -161,6 +162,8 @@ _UNIT_TOL = 1e-6
 
 #: relative step change below which a mount-dynamics transition matrix is reused [1]
 _DT_RTOL = 1e-9
+#: mount-dynamics models (``MountDynamics.model``)
+MOUNT_MODELS = ("lowpass", "mount")
 
 _J211_AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, -1.0, 0.0), "z": (0.0, 0.0, -1.0)}
 
@@ -303,21 +306,28 @@ class BoundaryContacts:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class MountDynamics:
-    """Second-order transducer/mount response ``wn^2 / (s^2 + 2 zeta wn s + wn^2)``.
+    """Second-order transducer/mount response.
 
     Parameters
     ----------
     natural_frequency : undamped natural frequency fn [Hz], > 0
     damping_ratio : zeta [1], in [0, 10]
+    model : ``"lowpass"`` (default): seismic transducer ``wn^2 / (s^2 + 2 zeta wn s + wn^2)``;
+        ``"mount"``: base-excitation transmissibility of an accelerometer on a resonant mount,
+        ``(2 zeta wn s + wn^2) / (s^2 + 2 zeta wn s + wn^2)`` (the sensor mass's absolute
+        acceleration)
 
     Notes
     -----
-    Base-excited seismic transducer (unit static gain); e.g. Harris' Shock and Vibration
-    Handbook, ch. 12.
+    Both have unit static gain and the same resonance; they differ in the damping's role and in
+    the high-frequency roll-off (-40 dB/decade for the low-pass, -20 dB/decade for the mount).
+    Harris' Shock and Vibration Handbook, ch. 12 (seismic transducer); Thomson & Dahl, *Theory
+    of Vibration with Applications*, section 3.5 (transmissibility).
     """
 
     natural_frequency: float  # [Hz], > 0
     damping_ratio: float  # [1], in [0, 10]
+    model: str = "lowpass"  # "lowpass" or "mount"
 
     def __post_init__(self) -> None:
         if not (math.isfinite(self.natural_frequency) and self.natural_frequency > 0):
@@ -326,6 +336,8 @@ class MountDynamics:
         if not (math.isfinite(self.damping_ratio) and 0.0 <= self.damping_ratio <= 10.0):
             raise ValueError(f"MountDynamics.damping_ratio={self.damping_ratio!r}: "
                              "must be in [0, 10] [1]")
+        if self.model not in MOUNT_MODELS:
+            raise ValueError(f"MountDynamics.model={self.model!r}: must be one of {MOUNT_MODELS}")
 
     def foh_matrix(self, h: float) -> np.ndarray:
         """Exact first-order-hold transition over a step ``h`` [s].
@@ -345,6 +357,8 @@ class MountDynamics:
         m[1, 0] = -wn * wn
         m[1, 1] = -2.0 * z * wn
         m[1, 2] = wn * wn
+        if self.model == "mount":  # numerator 2 zeta wn s: the input rate drives the damper
+            m[1, 3] = 2.0 * z * wn
         m[2, 3] = 1.0
         return expm(m * h)[:2, :]
 
@@ -383,7 +397,7 @@ class MountDynamics:
                 y[k] = state[0]
         meta = dict(signal.meta)
         meta["dynamics"] = {"natural_frequency": self.natural_frequency,
-                            "damping_ratio": self.damping_ratio}
+                            "damping_ratio": self.damping_ratio, "model": self.model}
         return Signal(signal.name, t.copy(), y, signal.unit, signal.cfc, meta)
 
 
@@ -440,7 +454,8 @@ class _Sensor:
             out["failure_factor"] = float(self.failure_factor)
         if self.dynamics is not None:
             out["dynamics"] = {"natural_frequency": self.dynamics.natural_frequency,
-                               "damping_ratio": self.dynamics.damping_ratio}
+                               "damping_ratio": self.dynamics.damping_ratio,
+                               "model": self.dynamics.model}
         if self.iso_code is not None:
             out["iso_code"] = self.iso_code
         if self.cfc is not None:
@@ -1244,7 +1259,8 @@ def sensor_set_from_scenario(scenario: Any, mounts: Sequence[Any], body: str = "
     if scenario.get("physics.sensor_dynamics.enabled"):
         dyn = MountDynamics(
             natural_frequency=float(scenario.get("physics.sensor_dynamics.natural_frequency")),
-            damping_ratio=float(scenario.get("physics.sensor_dynamics.damping_ratio")))
+            damping_ratio=float(scenario.get("physics.sensor_dynamics.damping_ratio")),
+            model=str(scenario.get("physics.sensor_dynamics.model") or "lowpass"))
         cfc_dyn = scenario.get("physics.sensor_dynamics.cfc")
         if cfc_dyn is not None:
             cfc = cfc_dyn

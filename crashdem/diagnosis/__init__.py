@@ -33,10 +33,11 @@ from crashdem.diagnosis import catalogue
 from crashdem.diagnosis.catalogue import CATALOGUE, RECALIBRATION, Hypothesis
 from crashdem.diagnosis.fit import (ACCEPT_MARGIN, MIN_SCORE_GAIN, PRE_ONSET, WITHIN_NOISE_RATIO,
                                     FitProblem, FitResult, event_window, fit_hypothesis,
-                                    metric_name, rank, score_signals)
+                                    fit_variants, metric_name, rank, score_signals)
 from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align, estimate_noise,
                                          locate_mismatch, onset_time)
-from crashdem.diagnosis.rom import PENETRATION, RomParams, RomSettings, RomSimulator
+from crashdem.diagnosis.rom import ACCEL, PENETRATION, VELOCITY, RomParams, RomSettings, RomSimulator
+from crashdem.diagnosis.sensor_check import accel_velocity_check
 from crashdem.signal import Signal
 
 __all__ = ["Report", "confirm", "diagnose", "screen_then_confirm", "write_report", "catalogue",
@@ -151,6 +152,33 @@ BASELINE_CALIBRATION = Hypothesis(
     None, (), RECALIBRATION.to_scenario)
 
 
+def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, Any],
+                        recal: FitResult) -> FitResult:
+    """The ``sensor_dynamics`` fit when the model-free sensor check found the sensor: the form,
+    frequency and damping are the check's (fixed), the recalibration is refitted with them."""
+    fixed = {"mount_frequency": float(check["mount_frequency"]),
+             "mount_damping": float(check["mount_damping"]),
+             "mount_form": float(check["form"] == "mount")}
+    base = dict(problem.base_values)
+    problem.base_values = {**base, **fixed}
+    try:
+        r = fit_hypothesis(problem, RECALIBRATION, start=recal.parameters, grid_points=1,
+                           n_starts=1)
+    finally:
+        problem.base_values = base
+    r.hypothesis = h.name
+    r.variant = str(check["form"])
+    for p in h.parameters:
+        r.parameters[p.name] = fixed[p.name]
+        r.uncertainty[p.name] = float(check["uncertainty"][p.name])
+        r.units[p.name] = p.unit
+    r.k += len(h.parameters)
+    r.form_penalty = math.log(len(h.variants) or 1)
+    r.complexity_penalty = r.k * math.log(r.n_eff) + r.form_penalty
+    r.bic = r.n_eff * math.log(max(r.rss, 1e-300) / r.n) + r.complexity_penalty
+    return r
+
+
 def _residual_n_eff(problem: FitProblem, res: FitResult) -> float:
     """Independent samples of a fit's weighted residual over the event window: per channel
     ``N / tau`` with ``tau`` the integral correlation length in samples
@@ -171,7 +199,7 @@ def _requalify(results: list[FitResult], n_eff: float) -> None:
         f = math.sqrt(r.n_eff / n_eff) if n_eff < r.n_eff else 1.0
         r.uncertainty = {k: v * f for k, v in r.uncertainty.items()}
         r.n_eff = n_eff
-        r.complexity_penalty = r.k * math.log(n_eff)
+        r.complexity_penalty = r.k * math.log(n_eff) + r.form_penalty
         r.bic = n_eff * math.log(max(r.rss, 1e-300) / r.n) + r.complexity_penalty
 
 
@@ -392,12 +420,22 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     base_rms = float(np.sqrt(np.mean(base_res**2)))
 
     names = list(hypotheses) if hypotheses is not None else list(catalogue.NAMES)
+    # model-free sensor check: the accelerometer against the measured velocity's derivative
+    check: dict[str, Any] = {"applicable": False, "reason": "needs accel_z and velocity_z"}
+    if ACCEL in channels and VELOCITY in channels:
+        check = accel_velocity_check(rec[ACCEL], rec[VELOCITY],
+                                     quiet=noise[ACCEL].window if noise[ACCEL].window else None,
+                                     accept_margin=accept_margin)
+    sensor_found = bool(check.get("detected")) and "sensor_dynamics" in names
     fits: dict[str, FitResult] = {}
     recal = fit_hypothesis(problem, RECALIBRATION, grid_points=1, n_starts=1)
     fits[RECALIBRATION.name] = recal
     for name in names:
         h = catalogue.get(name)
-        fits[name] = fit_hypothesis(problem, h, start=recal.parameters)
+        if name == "sensor_dynamics" and sensor_found:
+            fits[name] = _fit_checked_sensor(problem, h, check, recal)
+        else:
+            fits[name] = fit_variants(problem, h, start=recal.parameters)
     # error model from the residual of the most complete explanation (lowest RSS): correlated
     # model-form error left by it (granular force fluctuations, another code's numerics, a
     # screening model coarser than the recording) leaves fewer independent samples than the
@@ -407,6 +445,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     if n_eff_res < problem.n_eff:
         _requalify(list(fits.values()), n_eff_res)
         problem.n_eff = n_eff_res
+    if sensor_found:
+        # the evidence for the sensor is the model-free check's, not the soil-model fit's
+        fits["sensor_dynamics"].bic = recal.bic - float(check["delta_bic"])
     ranked = rank(list(fits.values()))
 
     # decision
@@ -415,6 +456,14 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         decision = (f"baseline explains the recording within noise (residual {base_rms:.2f} sigma "
                     f"RMS <= {WITHIN_NOISE_RATIO})")
         missing, best_name, chosen = None, None, None
+    elif sensor_found and best_phys is not None and best_phys.hypothesis == "sensor_dynamics":
+        decision = (f"sensor_dynamics: the accelerometer disagrees with the measured velocity's "
+                    f"derivative by {check['rms_sigma_ideal']:.1f} sigma RMS, explained by a "
+                    f"{check['form']} sensor at {check['mount_frequency']:.1f} Hz, zeta "
+                    f"{check['mount_damping']:.3f} ({check['rms_sigma_fitted']:.2f} sigma RMS; "
+                    f"Delta BIC = {check['delta_bic']:.1f} > {accept_margin:g}, no soil model "
+                    "involved)")
+        missing, best_name, chosen = best_phys.hypothesis, best_phys.hypothesis, best_phys
     elif best_phys is not None and (recal.bic - best_phys.bic) > accept_margin and (
             best_phys.scores["overall"] - recal.scores["overall"]) >= MIN_SCORE_GAIN:
         decision = (f"{best_phys.hypothesis} beats recalibration by Delta BIC = "
@@ -436,9 +485,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             if name == missing:
                 continue
             h2 = catalogue.combine(missing, name)
-            r2 = fit_hypothesis(problem, h2, start=chosen.parameters,
-                                grid_over=[p.name for p in catalogue.get(name).parameters],
-                                n_starts=3, n_full=3)
+            r2 = fit_variants(problem, h2, start=chosen.parameters,
+                              grid_over=[p.name for p in catalogue.get(name).parameters],
+                              n_starts=3, n_full=3)
             fits[h2.name] = r2
             combos.append(r2)
         best2 = min(combos, key=lambda r: r.bic)
@@ -467,7 +516,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             "recalibration": {p.name: r.parameters[p.name] for p in RECALIBRATION.parameters},
             "recalibration_uncertainty": {p.name: r.uncertainty[p.name]
                                           for p in RECALIBRATION.parameters},
-            "scenario_overrides": h.scenario_overrides(r.parameters),
+            "variant": r.variant,
+            "scenario_overrides": h.scenario_overrides(r.parameters, r.variant),
             "effects": r.hypothesis.split("+") if r.hypothesis != RECALIBRATION.name else [],
             "score_before": base_scores["overall"],
             "score_after": r.scores["overall"],
@@ -477,7 +527,11 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             "complexity_penalty": r.complexity_penalty,
             "n_parameters": r.k,
             "parameters_at_bounds": r.at_bounds,
-            "evidence": _evidence(h, r, windows, after_r, base_rms),
+            "evidence": _evidence(h, r, windows, after_r, base_rms) + (
+                f" The accelerometer disagrees with the recorded velocity's derivative by "
+                f"{check['rms_sigma_ideal']:.1f} sigma RMS; a {check['form']} sensor explains it "
+                f"to {check['rms_sigma_fitted']:.2f} sigma (model-free check)."
+                if (sensor_found and r.hypothesis == "sensor_dynamics") else ""),
             "time_shift_s": r.shift_s,
             "n_evaluations": r.n_evals,
         })
@@ -497,6 +551,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "recalibration_unexplained": bool(recal.rms_sigma > WITHIN_NOISE_RATIO and
                                           base_rms > WITHIN_NOISE_RATIO),
         "score_window_s": list(problem.score_window),
+        "sensor_check": check,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
     # filtered noise, or far above it, is model-form error the catalogue does not cover
@@ -629,11 +684,15 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
 
     confirmed, best = None, recal_row
     screened = next((r for r in cands if r["hypothesis"] == rep.missing_physics), None)
-    if screened is not None and screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN:
+    # a sensor found by the model-free accelerometer/velocity check needs no soil model: its
+    # full run only adds granular noise to the same conclusion
+    checked = (rep.missing_physics == "sensor_dynamics"
+               and bool(rep.fit.get("sensor_check", {}).get("detected")))
+    if screened is not None and (checked or screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN):
         # the screening's claim stands unless its full run is decisively worse than the
         # reference or another candidate's full run is decisively better than it
         confirmed, best = screened["hypothesis"], screened
-    rivals = [r for r in cands if r is not screened and decisive(r)]
+    rivals = [] if checked else [r for r in cands if r is not screened and decisive(r)]
     if rivals:
         top = max(rivals, key=lambda r: r["score"])
         if screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
@@ -666,7 +725,7 @@ def _confirmation_overrides(h: dict[str, Any]) -> dict[str, Any]:
         if p.off is not None and p.name in vals and \
                 abs(p.to_unit(vals[p.name]) - p.to_unit(p.off)) < 0.02:
             vals[p.name] = p.nominal
-    return dict(hyp.scenario_overrides({**h["recalibration"], **vals}))
+    return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
 
 
 def _full_rss(rep: Report, aligned: Mapping[str, Signal]) -> float:

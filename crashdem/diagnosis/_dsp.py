@@ -85,25 +85,50 @@ def effective_samples(n: int, fs: float, cfc_class: float | None) -> float:
     return float(min(n, n * 2.0 * noise_bandwidth(fs, cfc_class) / fs))
 
 
-def mount_filter_bilinear(x: np.ndarray, dt: float, fn: float, zeta: float) -> np.ndarray:
-    """Accelerometer-mount transmissibility, bilinear (Tustin) discretisation pre-warped at fn.
+def mount_filter_bilinear(x: np.ndarray, dt: float, fn: float, zeta: float,
+                          form: float = 1.0) -> np.ndarray:
+    """Accelerometer-mount response, bilinear (Tustin) discretisation pre-warped at fn.
 
     Parameters
     ----------
     x : base acceleration samples [m/s^2] at step dt [s]; fn : mount natural frequency [Hz];
-    zeta : mount damping ratio [-]
+    zeta : mount damping ratio [-]; form : weight of the damper term in the numerator,
+        ``H = (2 form zeta wn s + wn^2) / (s^2 + 2 zeta wn s + wn^2)``: 1 = transmissibility of a
+        resonant mount, 0 = seismic transducer low-pass (``crashdem.sensors.MountDynamics``
+        models "mount" and "lowpass")
+
+    Notes
+    -----
+    The filter starts at rest in equilibrium with the first sample (the record starts in
+    free fall or at rest), like ``MountDynamics.apply``.
     """
     wn = 2.0 * math.pi * fn
     # pre-warp: scale so the discrete resonance sits at fn (Oppenheim & Schafer eq. 7.26)
     wp = 2.0 / dt * math.tan(wn * dt / 2.0)
-    b, a = sps.bilinear([2.0 * zeta * wp, wp * wp], [1.0, 2.0 * zeta * wp, wp * wp], fs=1.0 / dt)
-    return sps.lfilter(b, a, x)
+    b, a = sps.bilinear(_numerator(form, zeta, wp), [1.0, 2.0 * zeta * wp, wp * wp], fs=1.0 / dt)
+    return _lfilter_at_rest(b, a, x)
 
 
-def mount_filter_exact(x: np.ndarray, dt: float, fn: float, zeta: float) -> np.ndarray:
-    """Same transmissibility, first-order-hold exact discretisation (for the truth generator)."""
+def _numerator(form: float, zeta: float, w: float) -> list[float]:
+    """``2 form zeta w s + w^2`` (without the s term when form = 0: a zero leading coefficient
+    is an ill-conditioned numerator for scipy)."""
+    return [2.0 * form * zeta * w, w * w] if form > 0.0 else [w * w]
+
+
+def _lfilter_at_rest(b: np.ndarray, a: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``lfilter`` started in steady state with the first sample (unit static gain filters)."""
+    x = np.asarray(x, dtype=float)
+    if x.size == 0 or x[0] == 0.0:
+        return sps.lfilter(b, a, x)
+    zi = sps.lfilter_zi(b, a) * x[0]
+    return sps.lfilter(b, a, x, zi=zi)[0]
+
+
+def mount_filter_exact(x: np.ndarray, dt: float, fn: float, zeta: float,
+                       form: float = 1.0) -> np.ndarray:
+    """Same response, first-order-hold exact discretisation (for the truth generator)."""
     wn = 2.0 * math.pi * fn
-    sysd = sps.cont2discrete(([2.0 * zeta * wn, wn * wn], [1.0, 2.0 * zeta * wn, wn * wn]), dt,
+    sysd = sps.cont2discrete((_numerator(form, zeta, wn), [1.0, 2.0 * zeta * wn, wn * wn]), dt,
                              method="foh")
     b = np.ravel(sysd[0])
     a = np.ravel(sysd[1])

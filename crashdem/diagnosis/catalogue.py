@@ -22,7 +22,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-__all__ = ["ParameterSpec", "Hypothesis", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
+__all__ = ["ParameterSpec", "Hypothesis", "Variant", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "friction_ratio_from_rolling", "rolling_from_friction_ratio"]
 
 #: friction ratio with free rotation and no rolling resistance (mu_r = 0) [-] (ROM assumption)
@@ -89,6 +89,17 @@ class ParameterSpec:
 
 
 @dataclass(frozen=True)
+class Variant:
+    """A discrete model form of a hypothesis: fixed screening-model values and the scenario
+    keys that select the same form in the full simulation."""
+
+    label: str
+    rom_values: dict[str, float]
+    scenario: dict[str, Any]
+    description: str = ""
+
+
+@dataclass(frozen=True)
 class Hypothesis:
     """A candidate explanation: physics text, parameters and scenario switch."""
 
@@ -98,14 +109,29 @@ class Hypothesis:
     scenario_switch: str | None
     signature: tuple[str, ...] = ()
     to_scenario: Callable[[dict[str, float]], dict[str, Any]] | None = field(default=None, compare=False)
+    #: discrete model forms of the same physics, each fitted and the best kept (BIC, plus
+    #: ln(number of forms) for the choice): ``Variant(label, rom_values, scenario_overrides)``
+    variants: tuple["Variant", ...] = ()
 
     @property
     def n_params(self) -> int:
         """Number of the hypothesis's own parameters."""
         return len(self.parameters)
 
-    def scenario_overrides(self, values: dict[str, float]) -> dict[str, Any]:
-        """Scenario keys that switch this effect on with the fitted ``values``."""
+    def variant(self, label: str | None) -> "Variant | None":
+        """The variant called ``label`` (None when the hypothesis has no variants)."""
+        if label is None or not self.variants:
+            return None
+        for v in self.variants:
+            if v.label == label:
+                return v
+        raise ValueError(f"{self.name}: variant {label!r} unknown; known: "
+                         f"{[v.label for v in self.variants]}")
+
+    def scenario_overrides(self, values: dict[str, float],
+                           variant: str | None = None) -> dict[str, Any]:
+        """Scenario keys that switch this effect on with the fitted ``values`` (and the scenario
+        keys of the fitted ``variant``)."""
         out: dict[str, Any] = {}
         if self.scenario_switch:
             out[self.scenario_switch] = True
@@ -115,6 +141,9 @@ class Hypothesis:
             for p in self.parameters:
                 if p.scenario_key and p.name in values:
                     out[p.scenario_key] = float(values[p.name])
+        var = self.variant(variant)
+        if var is not None:
+            out.update(var.scenario)
         return out
 
     def describe(self) -> dict[str, Any]:
@@ -124,6 +153,8 @@ class Hypothesis:
             "physics": self.physics,
             "scenario_switch": self.scenario_switch,
             "signature": list(self.signature),
+            "variants": [{"label": v.label, "description": v.description,
+                          "scenario": v.scenario} for v in self.variants],
             "parameters": [
                 {"name": p.name, "unit": p.unit, "range": [p.lo, p.hi], "nominal": p.nominal,
                  "scale": p.scale, "scenario_key": p.scenario_key, "description": p.description}
@@ -244,6 +275,15 @@ CATALOGUE: tuple[Hypothesis, ...] = (
                        "mount damping ratio", "physics.sensor_dynamics.damping_ratio")),
         "physics.sensor_dynamics.enabled",
         ("oscillation", "peak_too_low", "extra_peak", "missing_peak"),
+        variants=(
+            Variant("mount", {"mount_form": 1.0},
+                    {"physics.sensor_dynamics.model": "mount"},
+                    "resonant mount: base-excitation transmissibility "
+                    "(2 zeta wn s + wn^2)/(s^2 + 2 zeta wn s + wn^2)"),
+            Variant("lowpass", {"mount_form": 0.0},
+                    {"physics.sensor_dynamics.model": "lowpass"},
+                    "seismic transducer: wn^2/(s^2 + 2 zeta wn s + wn^2)"),
+        ),
     ),
     Hypothesis(
         "structural_crush",
@@ -286,8 +326,20 @@ def combine(*names: str) -> Hypothesis:
             out.update(h.scenario_overrides(v))
         return out
 
+    # discrete forms: the product of the parts' variants (labels joined by "+")
+    variants: tuple[Variant, ...] = ()
+    for h in hs:
+        if not h.variants:
+            continue
+        if not variants:
+            variants = h.variants
+        else:
+            variants = tuple(Variant(f"{a.label}+{b.label}", {**a.rom_values, **b.rom_values},
+                                     {**a.scenario, **b.scenario}) for a in variants
+                             for b in h.variants)
     return Hypothesis("+".join(names), " AND ".join(h.physics for h in hs), tuple(params), None,
-                      tuple(sig for h in hs for sig in h.signature), to_scenario=to_scen)
+                      tuple(sig for h in hs for sig in h.signature), to_scenario=to_scen,
+                      variants=variants)
 
 
 def get(name: str) -> Hypothesis:

@@ -66,6 +66,7 @@ def rom_from_scenario(scen) -> RomParams:
     if g("sensor_dynamics.enabled"):
         vals["mount_frequency"] = g("sensor_dynamics.natural_frequency")
         vals["mount_damping"] = g("sensor_dynamics.damping_ratio")
+        vals["mount_form"] = 1.0 if g("sensor_dynamics.model") == "mount" else 0.0
     if g("structural_crush.enabled"):
         vals["crush_strength"] = g("structural_crush.crush_force")
         vals["crush_stroke"] = g("structural_crush.stroke")
@@ -153,7 +154,17 @@ def diagnose_command(args: argparse.Namespace) -> int:
                                  mode=getattr(args, "baseline", None) or "run",
                                  out_dir=Path(args.out))
     n_full = getattr(args, "full_confirm", None)
+    if n_full is None:
+        # default: confirm the two best screened candidates with the full DEM (1 + 2 runs)
+        # whenever the baseline is a full simulation (the screening alone cannot see what the
+        # reduced-order model lacks; measured on DEM truth, docs/diagnosis.md)
+        n_full = 0 if source == "rom" else DEFAULT_FULL_CONFIRM
+    if n_full < 0:
+        raise ValueError(f"--full-confirm={n_full!r}: must be >= 0 (0 = screening only)")
     if n_full:
+        dask = getattr(args, "workers", None) != 0
+        _share_packings(source, [Path(args.out) / ("confirmation.h5.members" if dask
+                                                   else "full_runs")])
         from crashdem.recordings import read_recording as _read
         from crashdem.run import run_scenario
 
@@ -163,7 +174,8 @@ def diagnose_command(args: argparse.Namespace) -> int:
             s2 = scen.with_overrides(_apply_scales(scen, scale_keys) | keys)
             path = run_scenario(s2, out_dir=Path(args.out) / "full_runs", progress=False)
             res = _read(path)
-            return {cmap_name: res[name] for name, cmap_name in cmap.items() if name in res}
+            got = {rom_name: _pick(res, name, rom_name) for name, rom_name in cmap.items()}
+            return {k: v for k, v in got.items() if v is not None}
 
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
             from crashdem.diagnosis.distributed import full_simulator_from_args
@@ -182,6 +194,30 @@ def diagnose_command(args: argparse.Namespace) -> int:
     for p in paths["plots"]:
         print(p)
     return 0
+
+
+#: full simulations of the default confirmation (the recalibrated run + the two best candidates)
+DEFAULT_FULL_CONFIRM = 3
+
+
+def _share_packings(source: str, run_dirs: list[Path]) -> None:
+    """Let the confirmation runs reuse the baseline's deposited beds: link the packing cache of
+    each confirmation run directory (``OUT/confirmation.h5.members`` on Dask, ``OUT/full_runs``
+    in process) to the baseline run's (``<baseline dir>/packings``) when it does not exist yet."""
+    if not (source.startswith("full run ") or source.startswith("full result ")):
+        return
+    base = Path(source.split(" ", 2)[2]).parent / "packings"
+    if not base.is_dir():
+        return
+    for d in run_dirs:
+        link = d / "packings"
+        if link.exists() or link.is_symlink():
+            continue
+        try:
+            d.mkdir(parents=True, exist_ok=True)
+            link.symlink_to(base.resolve(), target_is_directory=True)
+        except OSError:  # no symlinks on this file system: the runs deposit their own bed
+            pass
 
 
 #: simulation channel that stands for each model channel when the recording's names differ

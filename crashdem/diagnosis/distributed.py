@@ -147,13 +147,20 @@ class DaskFullSimulator:
                               f"{o.error}" for o in failed)
             raise RuntimeError(f"full-simulation confirmation: {len(failed)} of {len(outcomes)} "
                                f"runs failed ({path}): {lines}")
+        from crashdem.diagnosis.cli import SIM_CHANNELS
+
         out: list[dict[str, Signal]] = []
         with en.open_ensemble(path) as ens:
             for o in outcomes:
                 names = ens.channels(o.index)
                 cmap = self.channel_map if self.channel_map is not None else {n: n for n in names}
-                out.append({new: _renamed(ens.channel(o.index, name, filtered=self.filtered), new)
-                            for name, new in cmap.items() if name in names})
+                got = {}
+                for name, new in cmap.items():
+                    # the recorded name, else the impactor channel standing for the model one
+                    src = name if name in names else SIM_CHANNELS.get(new)
+                    if src in names:
+                        got[new] = _renamed(ens.channel(o.index, src, filtered=self.filtered), new)
+                out.append(got)
         return out
 
     def __call__(self, overrides: Mapping[str, Any]) -> dict[str, Signal]:

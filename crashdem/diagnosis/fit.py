@@ -38,7 +38,7 @@ from crashdem.diagnosis.catalogue import RECALIBRATION, Hypothesis, ParameterSpe
 from crashdem.diagnosis.mismatch import NoiseEstimate, align
 from crashdem.signal import Signal
 
-__all__ = ["FitProblem", "FitResult", "score_signals", "fit_hypothesis", "rank", "metric_name",
+__all__ = ["FitProblem", "FitResult", "score_signals", "fit_hypothesis", "fit_variants", "rank", "metric_name",
            "ACCEPT_MARGIN", "MIN_SCORE_GAIN", "WITHIN_NOISE_RATIO"]
 
 Simulator = Callable[[dict[str, float]], Mapping[str, Signal]]
@@ -235,6 +235,8 @@ class FitResult:
     aligned: dict[str, Signal]
     at_bounds: list[str]
     n_evals: int
+    variant: str | None = None  # the hypothesis's fitted discrete form (``Hypothesis.variants``)
+    form_penalty: float = 0.0  # ln(number of forms) added to the BIC for choosing the form
 
     @property
     def rms_sigma(self) -> float:
@@ -387,6 +389,34 @@ def fit_hypothesis(problem: FitProblem, h: Hypothesis, *, with_recal: bool = Tru
     return FitResult(h.name, vals, unc, {s.name: s.unit for s in specs}, shift, rss, n, n_eff, k,
                      bic, penalty, problem.scores(aligned), aligned, at_bounds,
                      problem.calls - calls0)
+
+
+def fit_variants(problem: FitProblem, h: Hypothesis, **kw) -> FitResult:
+    """``fit_hypothesis`` for each discrete form of ``h`` (``Hypothesis.variants``; the form's
+    fixed screening-model values are added to the problem's ``base_values``), the best by BIC
+    kept, with ``ln(number of forms)`` added to its BIC and complexity penalty (the choice among
+    equally probable forms costs that much evidence). Without variants: ``fit_hypothesis``."""
+    if not h.variants:
+        return fit_hypothesis(problem, h, **kw)
+    base = dict(problem.base_values)
+    best: FitResult | None = None
+    evals = 0
+    try:
+        for var in h.variants:
+            problem.base_values = {**base, **var.rom_values}
+            r = fit_hypothesis(problem, h, **kw)
+            evals += r.n_evals
+            r.variant = var.label
+            if best is None or r.bic < best.bic:
+                best = r
+    finally:
+        problem.base_values = base
+    assert best is not None
+    best.form_penalty = math.log(len(h.variants))
+    best.bic += best.form_penalty
+    best.complexity_penalty += best.form_penalty
+    best.n_evals = evals
+    return best
 
 
 def rank(results: list[FitResult]) -> list[FitResult]:

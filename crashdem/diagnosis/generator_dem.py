@@ -150,6 +150,8 @@ def draw_dem_effect(effect: str, rng: np.random.Generator) -> dict[str, Any]:
         out["physics.initial_conditions.velocity_offset"] *= -1.0
     if effect == "cohesion":
         out["physics.cohesion.shear_strength"] = out["physics.cohesion.normal_strength"]
+    if effect == "sensor_dynamics":  # which of the two standard sensor models (sensors.MOUNT_MODELS)
+        out["physics.sensor_dynamics.model"] = "mount" if rng.uniform() < 0.5 else "lowpass"
     return out
 
 
@@ -293,7 +295,8 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
     if effect is not None:
         for key, rom_name in COMPARED[effect].items():
             values[rom_name] = float(eff_ov[f"physics.{effect}.{key}"])
-        drawn = {k: float(v) for k, v in eff_ov.items() if not k.endswith(".enabled")}
+        drawn = {k: (v if isinstance(v, str) else float(v)) for k, v in eff_ov.items()
+                 if not k.endswith(".enabled")}
     return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset,
                             {"particles": info.get("particles"), "dt": info.get("dt"),
                              "wall_s": info.get("wall_s")}, drawn, dem_baseline(cache))

@@ -80,6 +80,19 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         lines.append(f"| {i} | {h['name']} | {ptxt} | {_fmt(h['score_before'])} | "
                      f"{_fmt(h['score_after'])} | {h['delta_bic_vs_recalibration']:.1f} | "
                      f"{h['complexity_penalty']:.1f} | {h['evidence']} |")
+    sc = fit.get("sensor_check") or {}
+    lines += ["", "## Accelerometer vs measured velocity (model-free sensor check)", ""]
+    if not sc.get("applicable"):
+        lines.append(f"Not applicable: {sc.get('reason', 'not run')}.")
+    else:
+        verdict = (f"**sensor dynamics found**: {sc['form']} sensor, fn = "
+                   f"{_fmt(sc['mount_frequency'])} ± {_fmt(sc['uncertainty']['mount_frequency'])} Hz, "
+                   f"zeta = {_fmt(sc['mount_damping'])} ± {_fmt(sc['uncertainty']['mount_damping'])}"
+                   if sc.get("detected") else "consistent with an ideal accelerometer")
+        lines.append(f"The acceleration differs from the derivative of the recorded velocity by "
+                     f"{_fmt(sc['rms_sigma_ideal'])} sigma RMS (ideal sensor, gain "
+                     f"{_fmt(sc['gain_ideal'])}); best sensor model: {_fmt(sc['rms_sigma_fitted'])} "
+                     f"sigma, Delta BIC = {sc['delta_bic']:.1f}: {verdict}.")
     lines += ["", f"## Fit ({fit['metric']})", "",
               "| channel | score before | score after | peak error before | peak error after | "
               "timing error before [ms] | timing error after [ms] | RMS before | RMS after |",

@@ -33,7 +33,8 @@ Model (z = tip depth below the free surface, positive down; v = dz/dt; forces up
 * ``structural_crush``: a nose mass (fraction of the total) joined to the body by an
   elastic-perfectly-plastic element of strength F_c, bottoming out after a stroke s_max;
 * ``sensor_dynamics``: the body acceleration seen through a mount resonance fn, zeta
-  (base-excitation transmissibility) before sampling and CFC filtering;
+  (``mount_form`` 1: base-excitation transmissibility of a resonant mount; 0: seismic-transducer
+  low-pass) before sampling and CFC filtering;
 * ``initial_conditions``: an offset of the impact speed.
 
 The "acceleration" channel is the specific force along +z (what an accelerometer on the body
@@ -135,6 +136,7 @@ class RomParams:
     # sensor_dynamics
     mount_frequency: float = INF  # [Hz] fn > 0 (inf = ideal mount)
     mount_damping: float = 0.1  # [-] zeta_m in (0, 2]
+    mount_form: float = 1.0  # [-] 1 = mount transmissibility, 0 = seismic low-pass (in [0, 1])
     # initial_conditions
     speed_offset: float = 0.0  # [m/s] added to impact_speed
 
@@ -168,6 +170,7 @@ class RomParams:
                hi_open=True)
         _check("mount_frequency", self.mount_frequency, 0.0, INF, "Hz", lo_open=True)
         _check("mount_damping", self.mount_damping, 0.0, 2.0, "1", lo_open=True)
+        _check("mount_form", self.mount_form, 0.0, 1.0, "1")
         _check("speed_offset", self.speed_offset, -0.9 * self.impact_speed, 100.0, "m/s")
 
     @property
@@ -264,10 +267,10 @@ def run_raw(params: RomParams, settings: RomSettings = RomSettings()
     if math.isfinite(params.mount_frequency):
         if settings.method == "symplectic":
             acc = _dsp.mount_filter_bilinear(acc, settings.dt, params.mount_frequency,
-                                              params.mount_damping)
+                                              params.mount_damping, params.mount_form)
         else:
             acc = _dsp.mount_filter_exact(acc, settings.dt, params.mount_frequency,
-                                           params.mount_damping)
+                                           params.mount_damping, params.mount_form)
     return t, acc, vel, dep
 
 

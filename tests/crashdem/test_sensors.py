@@ -472,6 +472,28 @@ def test_mount_resonance_amplification_at_fn():
     assert np.max(np.abs(s.data)) == pytest.approx(1 / (2 * zeta), rel=0.01)
 
 
+def test_mount_model_transmissibility_gain_at_fn():
+    """Oracle: the base-excitation transmissibility (2 zeta wn s + wn^2)/(s^2 + 2 zeta wn s +
+    wn^2) of a resonant mount has |H(fn)| = sqrt(1 + (2 zeta)^2) / (2 zeta) (Thomson & Dahl 3.5),
+    above the low-pass's 1/(2 zeta)."""
+    fn, zeta = 500.0, 0.3
+    wn = 2 * math.pi * fn
+    _, sig = run([Accelerometer(name="a", body="b",
+                                dynamics=MountDynamics(natural_frequency=fn, damping_ratio=zeta,
+                                                       model="mount"))],
+                 lambda t: {"b": BodyState(position=(0, 0, 0), rotation=np.eye(3),
+                                           acceleration=(math.sin(wn * t), 0, 0))},
+                 np.arange(0, 0.05, 2e-5), sampling="linear")
+    s = sig["a"].window(0.03, 0.05)
+    assert np.max(np.abs(s.data)) == pytest.approx(math.sqrt(1 + (2 * zeta) ** 2) / (2 * zeta),
+                                                   rel=0.01)
+
+
+def test_mount_model_must_be_known():
+    with pytest.raises(ValueError, match=r"MountDynamics\.model='spring'.*\('lowpass', 'mount'\)"):
+        MountDynamics(100.0, 0.1, "spring")
+
+
 # ------------------------------------------------------------------------------ load cells
 def test_load_cell_footprints_partition_a_force_field():
     """Oracle: partition -- eight rectangular cells tiling a 2 x 4 grid on the floor count every
@@ -640,7 +662,8 @@ def test_sensor_set_from_scenario_and_body_mounts():
     assert ss.fs == 10000.0
     assert info["accel_x"]["full_scale"] == pytest.approx(250 * G0)
     assert info["accel_y"]["full_scale"] == pytest.approx(50 * G0)
-    assert info["accel_x"]["dynamics"] == {"natural_frequency": 300.0, "damping_ratio": 0.2}
+    assert info["accel_x"]["dynamics"] == {"natural_frequency": 300.0, "damping_ratio": 0.2,
+                                           "model": "lowpass"}
     assert info["accel_x"]["cfc_class"] == 180.0 and info["pitch_rate"]["kind"] == "gyroscope"
     assert info["pitch_rate"]["full_scale"] == 20.0
     assert {"pitch_angle", "pitch_angle_integrated", "cg_velocity_z", "cg_displacement_z",

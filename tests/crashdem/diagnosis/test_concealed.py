@@ -145,3 +145,23 @@ def test_report_has_required_fields(runs):
         assert key in d["fit"]["before"] and key in d["fit"]["after"]
     ch = d["channels"][0]
     assert {"score", "peak_error", "timing_error_s", "rms_error"} <= set(d["fit"]["after"]["per_channel"][ch])
+
+
+@pytest.mark.parametrize("form, label", [(0.0, "lowpass"), (1.0, "mount")])
+def test_sensor_model_form_is_identified(form, label):
+    """Oracle: a truth whose accelerometer is a seismic low-pass (form 0) or a resonant mount
+    (form 1), 60 Hz, zeta 0.12 -- the two standard sensor models (``sensors.MountDynamics``);
+    the diagnosis fits both forms of ``sensor_dynamics`` and must name the truth's form, with
+    the frequency within 15 % and the damping within 30 % (a damping ratio is the weaker-
+    determined of the two)."""
+    from crashdem.diagnosis.generator import acquire
+
+    truth = RomParams(mount_frequency=60.0, mount_damping=0.12, mount_form=form)
+    rec = acquire(truth, np.random.default_rng(5), trigger_offset=0.001)
+    rep = diagnose(simulate(RomParams()), rec)
+    assert rep.missing_physics == "sensor_dynamics"
+    h = next(x for x in rep.hypotheses if x["name"] == "sensor_dynamics")
+    assert h["variant"] == label
+    assert h["scenario_overrides"]["physics.sensor_dynamics.model"] == label
+    assert h["parameters"]["mount_frequency"] == pytest.approx(60.0, rel=0.15)
+    assert h["parameters"]["mount_damping"] == pytest.approx(0.12, rel=0.30)

@@ -83,11 +83,52 @@ def test_mount_filters_resonant_gain(fn, zeta):
         assert amp == pytest.approx(gain, rel=0.02 if f is _dsp.mount_filter_exact else 0.01)
 
 
+@pytest.mark.parametrize("fn, zeta", [(50.0, 0.05), (120.0, 0.2)])
+def test_lowpass_form_resonant_gain(fn, zeta):
+    """Oracle: seismic-transducer low-pass wn^2/(s^2 + 2 zeta wn s + wn^2) at resonance has
+    |H(fn)| = 1/(2 zeta) (the transmissibility's damper term removed: ``form = 0``)."""
+    dt = 2e-5
+    t = np.arange(0.0, 40.0 / fn, dt)
+    x = np.sin(2 * math.pi * fn * t)
+    for f in (_dsp.mount_filter_bilinear, _dsp.mount_filter_exact):
+        y = f(x, dt, fn, zeta, 0.0)
+        tail = t > 30.0 / fn
+        amp = math.sqrt(2.0 * np.mean(y[tail] ** 2))
+        assert amp == pytest.approx(1.0 / (2.0 * zeta), rel=0.02 if f is _dsp.mount_filter_exact else 0.01)
+
+
+@pytest.mark.parametrize("model, form", [("mount", 1.0), ("lowpass", 0.0)])
+def test_rom_mount_forms_equal_the_run_sensor_models(model, form):
+    """Oracle: two independent exact discretisations of the same transfer function -- the
+    diagnosis's first-order-hold filter (scipy ``cont2discrete``) and the run's
+    ``MountDynamics.apply`` (matrix exponential of the augmented system) -- agree to round-off
+    on a piecewise-linear input; the Tustin filter of the screening model within 1 % of the
+    peak response at 12.5 kHz."""
+    from crashdem.sensors import MountDynamics
+    from crashdem.signal import Signal
+
+    fs = 12500.0
+    t = np.arange(0.0, 0.2, 1.0 / fs)
+    x = np.where(t > 0.01, 100.0 * np.sin(2 * math.pi * 30.0 * (t - 0.01))
+                 * np.exp(-((t - 0.05) ** 2) / 1e-3), 0.0)
+    y_run = MountDynamics(55.0, 0.12, model).apply(Signal("a", t, x, "m/s^2")).data
+    y_exact = _dsp.mount_filter_exact(x, 1.0 / fs, 55.0, 0.12, form)
+    y_tustin = _dsp.mount_filter_bilinear(x, 1.0 / fs, 55.0, 0.12, form)
+    assert np.max(np.abs(y_exact - y_run)) < 1e-9 * np.max(np.abs(y_run))
+    assert np.max(np.abs(y_tustin - y_run)) < 0.01 * np.max(np.abs(y_run))
+    # the two models differ (by the damper term) by more than the discretisation error
+    other = MountDynamics(55.0, 0.12, "lowpass" if model == "mount" else "mount")
+    assert np.max(np.abs(other.apply(Signal("a", t, x, "m/s^2")).data - y_run)) > \
+        0.02 * np.max(np.abs(y_run))
+
+
 def test_parameter_errors_name_field_value_and_range():
     with pytest.raises(ValueError, match=r"RomParams\.soil_modulus=-3.*must be in \(0, 1e\+11\] \[Pa\]"):
         RomParams(soil_modulus=-3e7)
     with pytest.raises(ValueError, match=r"RomParams\.restitution=0.*\(0, 1\]"):
         RomParams(restitution=0.0)
+    with pytest.raises(ValueError, match=r"RomParams\.mount_form=2.*must be in \[0, 1\]"):
+        RomParams(mount_form=2.0)
     with pytest.raises(ValueError, match="unknown parameter 'cohesionn'"):
         RomParams().with_values({"cohesionn": 1.0})
 

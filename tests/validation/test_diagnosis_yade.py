@@ -1,0 +1,40 @@
+"""The diagnosis on recordings made by another DEM code (Yade 2023.02a), when ``yade`` is
+installed (``validation/diagnosis_yade``; skipped otherwise, e.g. on CI).
+
+Oracle: the concealed truth of the Yade case (its own deposition, contact laws, time step and
+effect implementation). Two cases keep the cost down (a cold case costs one Yade deposition and
+impact, ~1-4 min; cached afterwards): a null case, on which no missing physics may be claimed,
+and a resonant accelerometer, which the model-free accelerometer/velocity check must name with
+its frequency within 15 %. The full set (6 effects x 2 seeds + 2 nulls) is
+``python validation/diagnose_yade.py`` (docs/diagnosis.md "Validation on Yade recordings").
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+from validation.diagnosis_yade.cases import yade_available  # noqa: E402
+
+pytestmark = pytest.mark.skipif(not yade_available(), reason="yade is not installed")
+
+
+def test_yade_null_case_claims_nothing():
+    from validation.diagnose_yade import diagnose_case
+
+    row = diagnose_case(None, 21)
+    assert row["claimed"] is None, row["decision"]
+
+
+def test_yade_sensor_resonance_is_named_with_its_frequency():
+    from validation.diagnose_yade import diagnose_case
+
+    row = diagnose_case("sensor_dynamics", 11)
+    assert row["claimed"] == "sensor_dynamics", row["decision"]
+    assert row["fitted"]["mount_frequency"] == pytest.approx(
+        row["drawn"]["natural_frequency"], rel=0.15)

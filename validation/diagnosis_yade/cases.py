@@ -1,0 +1,189 @@
+"""Concealed-effect drop-test recordings made by another DEM code (Yade 2023.02a).
+
+The diagnosis (issue 7) will be judged on recordings made by a DEM code other than crashdem's.
+This module makes such recordings with Debian's Yade: its own deposition (``makeCloud`` +
+damped settling), its own contact laws (``Law2_ScGeom_FrictPhys_CundallStrack``;
+``Law2_ScGeom6D_CohFrictPhys_CohesionMoment`` for cohesion), its own integrator and time step
+(``dt_factor x PWaveTimeStep``), and its own implementation of each effect:
+
+=====================  ==================================================================
+effect                 Yade truth (drawn from the seed)
+=====================  ==================================================================
+soil_layering          grains deeper than 0.25-0.40 m get 4-8 x the Young's modulus (no
+                       extra compaction: crashdem's layering also compacts the lower layer)
+boundary_proximity     a bed of 0.75-0.90 m instead of 2 m (the floor nearer)
+cohesion               ``CohFrictMat`` bonded bed, normal = shear cohesion 1-3e5 Pa
+particle_rotation      free grain rotations, no rolling resistance (crashdem: blocked)
+initial_conditions     impact speed offset +-2.5-4 m/s
+sensor_dynamics        the acceleration seen through ``MountDynamics`` 40-90 Hz, zeta
+                       0.05-0.15, model "lowpass" or "mount"
+=====================  ==================================================================
+
+Numerics unlike the baseline (crashdem, 0.10 m grains, packing seed 1, safety 0.3): Yade's
+deposition with seed ``2000 + seed``, mean radius 0.10 x (1 +- 0.10-0.15), ``dt_factor``
+0.2-0.4. The drop-mass history is acquired like a lab channel
+(``generator.acquire_samples``: integrating 12.5 kHz acquisition, 0.5 g / 0.05 m/s noise, 80 ms
+pre-trigger, +-2 ms trigger offset, CFC 60). The baseline is crashdem's small-resolution drop
+(``generator_dem.dem_baseline``).
+
+Runs are cached in ``<cache>/diagnosis_yade`` keyed by the configuration and this module's and
+the Yade script's sources.
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import shutil
+import subprocess
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
+from crashdem.diagnosis.generator_dem import BASE_OVERRIDES, SCENARIO, cache_dir, dem_baseline
+from crashdem.signal import Signal
+
+SCRIPT = Path(__file__).resolve().parent / "yade_truth.py"
+
+#: effect -> drawn parameters (low, high, scale); the parameter names are this module's
+YADE_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
+    "soil_layering": {"layer_depth": (0.25, 0.40, "lin"), "layer_young_factor": (4.0, 8.0, "log")},
+    "boundary_proximity": {"bed_depth": (0.75, 0.90, "lin")},
+    "cohesion": {"cohesion": (1.0e5, 3.0e5, "log")},
+    "particle_rotation": {},
+    "initial_conditions": {"speed_offset": (2.5, 4.0, "lin")},
+    "sensor_dynamics": {"natural_frequency": (40.0, 90.0, "log"),
+                        "damping_ratio": (0.05, 0.15, "lin")},
+}
+#: drawn parameter -> ROM parameter with the same meaning (compared by the validation)
+COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
+            "speed_offset": "speed_offset", "natural_frequency": "mount_frequency"}
+RADIUS_CHANGE = (0.10, 0.15)
+DT_FACTOR = (0.2, 0.4)
+
+
+def yade_available() -> bool:
+    """True when the ``yade`` executable is on the PATH."""
+    return shutil.which("yade") is not None
+
+
+@dataclass(frozen=True)
+class YadeCase:
+    """A Yade-made recording and its hidden truth (``generator.ConcealedCase`` interface)."""
+
+    effect: str | None
+    values: dict[str, float]
+    seed: int
+    recording: dict[str, Signal]
+    drawn: dict[str, Any]
+    baseline: dict[str, Signal] = field(repr=False, default_factory=dict)
+    meta: dict[str, Any] = field(default_factory=dict)
+    recalibration: dict[str, float] = field(default_factory=dict)
+
+
+def _draw(lo: float, hi: float, scale: str, rng: np.random.Generator) -> float:
+    u = rng.uniform()
+    return math.exp(math.log(lo) + u * math.log(hi / lo)) if scale == "log" else lo + u * (hi - lo)
+
+
+def _scenario():
+    from crashdem import scenario as sc
+
+    return sc.load(SCENARIO, dict(BASE_OVERRIDES))
+
+
+def _fingerprint() -> str:
+    h = hashlib.sha256()
+    for f in (SCRIPT, Path(__file__)):
+        h.update(f.read_bytes())
+    return h.hexdigest()[:12]
+
+
+def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, Any]]:
+    """Run (or load) one Yade impact; returns the history (t, z, vz, Fz) and the run facts."""
+    store = cache / "diagnosis_yade"
+    store.mkdir(parents=True, exist_ok=True)
+    pk_key = hashlib.sha256(json.dumps({k: cfg[k] for k in (
+        "seed", "radius", "radius_spread", "bed_depth", "tank_radius", "young", "density",
+        "friction_angle", "stiffness_ratio", "deposit_unbalanced")}, sort_keys=True).encode()
+        + _fingerprint().encode()).hexdigest()[:16]
+    cfg = dict(cfg, packing_npz=str(store / f"packing-{pk_key}.npz"))
+    key = hashlib.sha256((json.dumps(cfg, sort_keys=True) + _fingerprint()).encode()).hexdigest()[:20]
+    out = store / key
+    if not Path(str(out) + ".npy").exists():
+        if not yade_available():
+            raise RuntimeError("yade is not installed (Debian: apt-get install yade)")
+        cfg["out"] = str(out)
+        cfg_path = store / f"{key}.cfg.json"
+        cfg_path.write_text(json.dumps(cfg))
+        proc = subprocess.run(["yade", "-n", "-j1", "-x", str(SCRIPT), str(cfg_path)],
+                              capture_output=True, text=True, cwd=str(store), timeout=3600)
+        if not Path(str(out) + ".npy").exists():
+            raise RuntimeError(f"yade failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return np.load(str(out) + ".npy"), json.loads(Path(str(out) + ".json").read_text())
+
+
+def yade_case(seed: int, effect: str | None, *, cache: Path | None = None) -> YadeCase:
+    """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
+    drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline."""
+    if effect is not None and effect not in YADE_EFFECT_DRAWS:
+        raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
+                         f"{sorted(YADE_EFFECT_DRAWS)} or None")
+    cache = Path(cache or cache_dir())
+    rng = np.random.default_rng(10_000 + seed)
+    drawn: dict[str, Any] = {}
+    if effect is not None:
+        for k, (lo, hi, sc_) in YADE_EFFECT_DRAWS[effect].items():
+            drawn[k] = _draw(lo, hi, sc_, rng)
+        if effect == "initial_conditions" and rng.uniform() < 0.5:
+            drawn["speed_offset"] *= -1.0
+        if effect == "sensor_dynamics":
+            drawn["model"] = "mount" if rng.uniform() < 0.5 else "lowpass"
+        if effect == "particle_rotation":
+            drawn["free_rotation"] = True
+    sign = 1.0 if rng.uniform() < 0.5 else -1.0
+    radius = round(0.10 * (1.0 + sign * rng.uniform(*RADIUS_CHANGE)), 5)
+    dt_factor = round(float(rng.uniform(*DT_FACTOR)), 4)
+    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
+    scen = _scenario()
+    m = scen["soil.material"]
+    v_imp = scen.impact_velocity + float(drawn.get("speed_offset", 0.0))
+    cfg: dict[str, Any] = {
+        "seed": 2000 + int(seed), "radius": radius, "radius_spread": scen["soil.radius_spread"],
+        "bed_depth": float(drawn.get("bed_depth", scen["container.soil_depth"])),
+        "tank_radius": 0.5 * scen["container.diameter"],
+        "tank_height": scen["container.soil_depth"] + 2.0,
+        "young": m["young"], "density": m["density"],
+        "friction_angle": math.radians(m["friction_angle_deg"]),
+        "stiffness_ratio": m["stiffness_ratio"], "deposit_unbalanced": 0.02, "gravity": 9.81,
+        "drop_radius": 0.45, "drop_mass": 850.0, "impactor_young": scen["impactor.material_young"],
+        "gap": 0.01, "impact_speed": v_imp, "dt_factor": dt_factor,
+        "t_end": scen["solver.t_end"] + 0.01,
+        "cohesion": drawn.get("cohesion"), "layer_depth": drawn.get("layer_depth"),
+        "layer_young_factor": drawn.get("layer_young_factor", 1.0),
+        "free_rotation": bool(drawn.get("free_rotation", False)),
+    }
+    hist, info = run_yade(cfg, cache)
+    t, vz, fz = hist[:, 0], hist[:, 2], hist[:, 3]
+    k_c = int(np.argmax(fz > 0.0))  # first step with a contact force
+    t0 = t[max(k_c - 1, 0)]
+    sel = slice(max(k_c - 1, 0), None)
+    t_raw = t[sel] - t0
+    acc = fz[sel] / info["mass"]
+    if effect == "sensor_dynamics":
+        from crashdem.sensors import MountDynamics
+
+        acc = MountDynamics(drawn["natural_frequency"], drawn["damping_ratio"],
+                            drawn["model"]).apply(Signal("a", t_raw, acc, "m/s^2")).data
+    rec = acquire_samples(t_raw, {"accel_z": (acc, "m/s^2"), "velocity_z": (vz[sel], "m/s")},
+                          float(-vz[sel][0]), rng, trigger_offset=offset,
+                          t_end=float(scen["solver.t_end"]),
+                          source=f"Yade 2023.02a truth (seed {cfg['seed']}, radius {radius:g} m, "
+                                 f"dt {info['dt']:.3g} s)")
+    values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
+    return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
+                    {"grains": info["grains"], "dt": info["dt"], "radius": radius,
+                     "dt_factor": dt_factor, "trigger_offset_s": offset})

@@ -1,0 +1,154 @@
+"""Yade side of the diagnosis's out-of-code validation (run inside Yade, not importable).
+
+``yade -n -j1 -x yade_truth.py <config.json>`` makes one "recording" of the drop test with
+Yade 2023.02a's own numerics, from its own deposition to its own contact laws:
+
+1. deposition (skipped when ``packing_npz`` exists): a ``pack.SpherePack.makeCloud`` cloud of
+   grains in a cylinder, settled under gravity with Yade's local non-viscous damping
+   (``NewtonIntegrator.damping``) until the unbalanced force falls below ``deposit_unbalanced``,
+   the grains above ``bed_depth`` removed, settled again; positions and radii saved;
+2. impact on a fresh scene: a ``utils.wall`` floor, a facet cylinder, the grains (``FrictMat``,
+   or ``CohFrictMat`` bonded at the first step when ``cohesion`` is given), the drop mass (a
+   sphere of the impactor material); Cundall-Strack law (``Law2_ScGeom_FrictPhys_CundallStrack``
+   or ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment``), no damping, rotations blocked unless
+   ``free_rotation``; the grains deeper than ``layer_depth`` get ``layer_young_factor`` x E;
+   ``O.dt = dt_factor * PWaveTimeStep()``;
+3. the history (t, z, vz, Fz) of the drop mass every step -> ``<out>.npy`` (+ ``.json`` facts).
+
+Everything else (the speed offset, the sensor, the acquisition) is applied by the driver.
+"""
+
+import json
+import math
+import os
+import sys
+
+import numpy as np
+
+cfg = json.load(open(sys.argv[1]))
+R_tank = cfg["tank_radius"]
+H = cfg["bed_depth"]
+r_mean = cfg["radius"]
+g = cfg["gravity"]
+
+
+def frict(young, density, phi, coh=None):
+    if coh is None:
+        return O.materials.append(FrictMat(  # noqa: F821 (Yade builtins)
+            young=young, poisson=cfg["stiffness_ratio"], frictionAngle=phi, density=density))
+    return O.materials.append(CohFrictMat(  # noqa: F821
+        young=young, poisson=cfg["stiffness_ratio"], frictionAngle=phi, density=density,
+        isCohesive=True, normalCohesion=coh, shearCohesion=coh, momentRotationLaw=False))
+
+
+def tank(mat):
+    O.bodies.append(utils.wall(0.0, axis=2, sense=1, material=mat))  # noqa: F821
+    O.bodies.append(geom.facetCylinder((0, 0, cfg["tank_height"] / 2), R_tank,  # noqa: F821
+                                       cfg["tank_height"], segmentsNumber=64, wallMask=4,
+                                       material=mat))
+
+
+if not os.path.exists(cfg["packing_npz"]):
+    m = frict(cfg["young"], cfg["density"], cfg["friction_angle"])
+    tank(m)
+    # grains for a bed of porosity ~0.40 plus 15 %, in a loose cloud three bed depths high
+    n_target = int(1.15 * 0.60 * math.pi * R_tank ** 2 * H / (4.0 / 3.0 * math.pi * r_mean ** 3))
+    sp = pack.SpherePack()  # noqa: F821
+    half = R_tank - 1.05 * r_mean * (1 + cfg["radius_spread"])
+    n_box = int(n_target * 4.0 / math.pi) + 1
+    sp.makeCloud((-half, -half, r_mean), (half, half, r_mean + 3.5 * H), rMean=r_mean,
+                 rRelFuzz=cfg["radius_spread"], num=n_box, seed=cfg["seed"])
+    for c, rad in sp:
+        if c[0] ** 2 + c[1] ** 2 <= half ** 2:
+            b = utils.sphere(c, rad, material=m)  # noqa: F821
+            b.state.blockedDOFs = "XYZ"
+            O.bodies.append(b)  # noqa: F821
+    O.engines = [  # noqa: F821
+        ForceResetter(),  # noqa: F821
+        InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb(), Bo1_Facet_Aabb()]),  # noqa: F821
+        InteractionLoop(  # noqa: F821
+            [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()],  # noqa: F821
+            [Ip2_FrictMat_FrictMat_FrictPhys()],  # noqa: F821
+            [Law2_ScGeom_FrictPhys_CundallStrack()]),  # noqa: F821
+        NewtonIntegrator(damping=0.4, gravity=(0.0, 0.0, -g)),  # noqa: F821
+    ]
+    O.dt = 0.5 * PWaveTimeStep()  # noqa: F821
+
+    def settle(t_min, max_steps):
+        O.run(int(t_min / O.dt), True)  # noqa: F821
+        k = 0
+        while unbalancedForce() > cfg["deposit_unbalanced"] and k < max_steps:  # noqa: F821
+            O.run(200, True)  # noqa: F821
+            k += 200
+
+    settle(1.2, 40000)
+    for b in list(O.bodies):  # noqa: F821
+        if isinstance(b.shape, Sphere) and b.state.pos[2] + b.shape.radius > H:  # noqa: F821
+            O.bodies.erase(b.id)  # noqa: F821
+    settle(0.3, 20000)
+    xs, rs = [], []
+    for b in O.bodies:  # noqa: F821
+        if isinstance(b.shape, Sphere):  # noqa: F821
+            xs.append(tuple(b.state.pos))
+            rs.append(b.shape.radius)
+    np.savez(cfg["packing_npz"], x=np.array(xs), radius=np.array(rs))
+    O.reset()  # noqa: F821
+
+data = np.load(cfg["packing_npz"])
+x, rad = data["x"], data["radius"]
+coh = cfg.get("cohesion")
+m_up = frict(cfg["young"], cfg["density"], cfg["friction_angle"], coh)
+m_low = m_up
+if cfg.get("layer_depth") is not None:
+    m_low = frict(cfg["young"] * cfg["layer_young_factor"], cfg["density"], cfg["friction_angle"],
+                  coh)
+m_wall = frict(cfg["young"], cfg["density"], cfg["friction_angle"])
+R = cfg["drop_radius"]
+rho_imp = cfg["drop_mass"] / (4.0 / 3.0 * math.pi * R ** 3)
+m_imp = frict(cfg["impactor_young"], rho_imp, 0.0)
+tank(m_wall)
+surface = float(np.max(x[:, 2] + rad))
+z_layer = surface - cfg["layer_depth"] if cfg.get("layer_depth") is not None else -1.0
+for i in range(len(rad)):
+    b = utils.sphere(tuple(x[i]), float(rad[i]),  # noqa: F821
+                     material=m_low if x[i, 2] < z_layer else m_up)
+    if not cfg.get("free_rotation", False):
+        b.state.blockedDOFs = "XYZ"
+    O.bodies.append(b)  # noqa: F821
+# the drop mass just above the grains under its footprint
+foot = np.hypot(x[:, 0], x[:, 1]) < R + rad
+top = float(np.max(x[foot, 2] + rad[foot])) if foot.any() else surface
+drop = utils.sphere((0.0, 0.0, top + R + cfg["gap"]), R, material=m_imp)  # noqa: F821
+drop.state.blockedDOFs = "XYZ"
+drop.state.vel = Vector3(0.0, 0.0, -cfg["impact_speed"])  # noqa: F821
+did = O.bodies.append(drop)  # noqa: F821
+if coh is None:
+    ig2 = [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
+    ip2 = [Ip2_FrictMat_FrictMat_FrictPhys()]  # noqa: F821
+    law = [Law2_ScGeom_FrictPhys_CundallStrack()]  # noqa: F821
+else:
+    ig2 = [Ig2_Sphere_Sphere_ScGeom6D(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
+    ip2 = [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys(setCohesionNow=True,  # noqa: F821
+                                                    setCohesionOnNewContacts=False),
+           Ip2_FrictMat_FrictMat_FrictPhys()]  # noqa: F821
+    law = [Law2_ScGeom6D_CohFrictPhys_CohesionMoment(), Law2_ScGeom_FrictPhys_CundallStrack()]  # noqa: F821
+O.engines = [  # noqa: F821
+    ForceResetter(),  # noqa: F821
+    InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb(), Bo1_Facet_Aabb()]),  # noqa: F821
+    InteractionLoop(ig2, ip2, law),  # noqa: F821
+    NewtonIntegrator(damping=0.0, gravity=(0.0, 0.0, -g)),  # noqa: F821
+]
+O.dt = cfg["dt_factor"] * PWaveTimeStep()  # noqa: F821
+n = int(math.ceil(cfg["t_end"] / O.dt))  # noqa: F821
+hist = np.zeros((n + 1, 4))
+b = O.bodies[did]  # noqa: F821
+hist[0] = (O.time, b.state.pos[2], b.state.vel[2], 0.0)  # noqa: F821
+for k in range(1, n + 1):
+    O.run(1, True)  # noqa: F821
+    hist[k] = (O.time, b.state.pos[2], b.state.vel[2], O.forces.f(did)[2])  # noqa: F821
+np.save(cfg["out"] + ".npy", hist)
+json.dump({"mass": b.state.mass, "steps": n, "dt": O.dt, "grains": int(len(rad)),  # noqa: F821
+           "surface_z": surface, "drop_top_z": top}, open(cfg["out"] + ".json", "w"))
+print("YADE_DONE")
+sys.stdout.flush()
+os._exit(0)
