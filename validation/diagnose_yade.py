@@ -36,12 +36,13 @@ TOP_K = 2
 def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K) -> dict:
     """Make (or load) one Yade case and diagnose it; returns the table row."""
     from crashdem.diagnosis import screen_then_confirm
-    from crashdem.diagnosis.generator_dem import DemFullSimulator
+    from crashdem.diagnosis.generator_dem import DemFullSimulator, impact_speed
 
     t0 = time.perf_counter()
     case = yade_case(seed, effect)
     t1 = time.perf_counter()
-    rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k)
+    rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
+                              impact_speed=impact_speed())
     t2 = time.perf_counter()
     top = rep.hypotheses[0]
     claimed = rep.missing_physics

@@ -37,6 +37,7 @@ from crashdem.diagnosis.fit import (ACCEPT_MARGIN, MIN_SCORE_GAIN, PRE_ONSET, WI
 from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align, estimate_noise,
                                          locate_mismatch, onset_time)
 from crashdem.diagnosis.rom import ACCEL, PENETRATION, VELOCITY, RomParams, RomSettings, RomSimulator
+from crashdem.diagnosis import _dsp
 from crashdem.diagnosis.sensor_check import accel_velocity_check
 from crashdem.signal import Signal
 
@@ -60,6 +61,10 @@ SECOND_STAGE_RMS = 4.0
 #: (floor proximity and cohesion still unclaimed, Delta BIC < 0) and moves the speed-offset
 #: recovery from +1.6/+14.7 % to -11.5/+13.1 %, so "time" stays the default
 ANCHOR_INDEX = "time"
+#: timing uncertainty of the acceleration onset used to extrapolate the free-fall velocity to
+#: the contact [s] (measured: the extrapolated impact speed of 7 DEM and Yade recordings within
+#: 0.06 m/s of the truth, i.e. ~6 ms x g)
+IMPACT_ONSET_TIMING = 0.006
 #: residual RMS [sigma] after the final fit above which the report warns of model-form error
 MODEL_ERROR_RMS = 3.0
 
@@ -152,13 +157,12 @@ BASELINE_CALIBRATION = Hypothesis(
     None, (), RECALIBRATION.to_scenario)
 
 
-def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, Any],
-                        recal: FitResult) -> FitResult:
-    """The ``sensor_dynamics`` fit when the model-free sensor check found the sensor: the form,
-    frequency and damping are the check's (fixed), the recalibration is refitted with them."""
-    fixed = {"mount_frequency": float(check["mount_frequency"]),
-             "mount_damping": float(check["mount_damping"]),
-             "mount_form": float(check["form"] == "mount")}
+def _fit_fixed(problem: FitProblem, h: Hypothesis, fixed: Mapping[str, float],
+               uncertainty: Mapping[str, float], recal: FitResult,
+               variant: str | None = None) -> FitResult:
+    """Hypothesis ``h`` with its own parameters *measured* outside the soil-model fit (``fixed``
+    ROM values, ``uncertainty`` of the reported ones): the recalibration is refitted with them;
+    the measured parameters still count in ``k``."""
     base = dict(problem.base_values)
     problem.base_values = {**base, **fixed}
     try:
@@ -167,16 +171,48 @@ def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, 
     finally:
         problem.base_values = base
     r.hypothesis = h.name
-    r.variant = str(check["form"])
+    r.variant = variant
     for p in h.parameters:
-        r.parameters[p.name] = fixed[p.name]
-        r.uncertainty[p.name] = float(check["uncertainty"][p.name])
+        r.parameters[p.name] = float(fixed[p.name])
+        r.uncertainty[p.name] = float(uncertainty[p.name])
         r.units[p.name] = p.unit
     r.k += len(h.parameters)
-    r.form_penalty = math.log(len(h.variants) or 1)
+    r.form_penalty = math.log(len(h.variants)) if (variant is not None and h.variants) else 0.0
     r.complexity_penalty = r.k * math.log(r.n_eff) + r.form_penalty
     r.bic = r.n_eff * math.log(max(r.rss, 1e-300) / r.n) + r.complexity_penalty
     return r
+
+
+def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, Any],
+                        recal: FitResult) -> FitResult:
+    """The ``sensor_dynamics`` fit when the model-free sensor check found the sensor: the form,
+    frequency and damping are the check's (fixed), the recalibration is refitted with them."""
+    fixed = {"mount_frequency": float(check["mount_frequency"]),
+             "mount_damping": float(check["mount_damping"]),
+             "mount_form": float(check["form"] == "mount")}
+    return _fit_fixed(problem, h, fixed, check["uncertainty"], recal, str(check["form"]))
+
+
+def measured_impact_speed(acc: Signal, vel: Signal, noise_vel: NoiseEstimate,
+                          sigma_acc: float, gravity: float = 9.81) -> dict[str, Any] | None:
+    """Impact speed read from the recording's free-fall velocity before the onset.
+
+    Before contact ``v_z(t) = -v_imp - g (t - t_on)``: the mean of ``v_z + g (t - t_on)`` over
+    the quiet pre-event segment (ending ``PRE_ONSET`` before the acceleration onset ``t_on``) is
+    ``-v_imp``. Uncertainty: the velocity noise over the segment's independent samples and the
+    onset timing (``IMPACT_ONSET_TIMING`` x g). None without a quiet segment of 8 samples.
+    """
+    a_s, v_s = acc.to_si(), vel.to_si()
+    t_on = onset_time(a_s, sigma_acc)
+    w = v_s.t <= t_on - PRE_ONSET
+    if noise_vel.window:
+        w &= v_s.t >= noise_vel.window[0]
+    if w.sum() < 8:
+        return None
+    c = float(np.mean(v_s.data[w] + gravity * (v_s.t[w] - t_on)))
+    n_eff = _dsp.effective_samples(int(w.sum()), v_s.fs, v_s.cfc)
+    sig = math.hypot(noise_vel.sigma / math.sqrt(max(n_eff, 1.0)), gravity * IMPACT_ONSET_TIMING)
+    return {"impact_speed": -c, "sigma": sig, "onset_s": t_on, "samples": int(w.sum())}
 
 
 def _residual_n_eff(problem: FitProblem, res: FitResult) -> float:
@@ -285,7 +321,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
              rom_base: RomParams | None = None, hypotheses: Sequence[str] | None = None,
              noise: Mapping[str, NoiseEstimate] | None = None,
              calibrate_to_baseline: bool = True, anchor_to_baseline: bool = True,
-             accept_margin: float = ACCEPT_MARGIN, anchor_index: str = ANCHOR_INDEX) -> Report:
+             accept_margin: float = ACCEPT_MARGIN, anchor_index: str = ANCHOR_INDEX,
+             impact_speed: float | None = None) -> Report:
     """Locate the mismatch, fit every hypothesis, decide the missing physics.
 
     Parameters
@@ -307,6 +344,11 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         and count what the screening model cannot reproduce of the baseline as a correlated
         model-error floor (``fit.FitProblem.model_error``)
     accept_margin : Delta BIC needed over the recalibration to claim missing physics
+    impact_speed : the baseline simulation's impact speed [m/s] (the CLI passes the
+        scenario's); with it and a recorded ``velocity_z`` holding a free-fall segment, the
+        ``initial_conditions`` speed offset is *measured* (``measured_impact_speed``: recorded
+        minus this) instead of fitted. Default: ``rom_base.v0`` when ``rom_base`` is given, else
+        not measured
     anchor_index : ``"time"`` (default ``ANCHOR_INDEX``): the discrepancy is transferred to a
         hypothesis at the same time; ``"depth"``: at the same tip depth of the screening model
         (``_depth_index``; an effect that stops the impactor earlier or lets it go deeper takes
@@ -427,6 +469,20 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
                                      quiet=noise[ACCEL].window if noise[ACCEL].window else None,
                                      accept_margin=accept_margin)
     sensor_found = bool(check.get("detected")) and "sensor_dynamics" in names
+    v_nom = impact_speed if impact_speed is not None else (rom_base.v0 if rom_base else None)
+    speed: dict[str, Any] | None = None
+    if v_nom is not None and VELOCITY in channels and ACCEL in rec:
+        speed = measured_impact_speed(rec[ACCEL], rec[VELOCITY], noise[VELOCITY],
+                                      noise[ACCEL].sigma if ACCEL in noise else sigma_p)
+        if speed is not None:
+            speed.update(nominal=float(v_nom), offset=speed["impact_speed"] - float(v_nom))
+            if not abs(speed["offset"]) < 0.5 * float(v_nom):
+                # another sign convention or unit, or another test: not an offset of this one
+                speed = {**speed, "used": False,
+                         "reason": f"recorded impact speed {speed['impact_speed']:.3g} m/s is not "
+                                   f"within 50 % of the baseline's {float(v_nom):.3g} m/s"}
+            else:
+                speed["used"] = True
     fits: dict[str, FitResult] = {}
     recal = fit_hypothesis(problem, RECALIBRATION, grid_points=1, n_starts=1)
     fits[RECALIBRATION.name] = recal
@@ -434,6 +490,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         h = catalogue.get(name)
         if name == "sensor_dynamics" and sensor_found:
             fits[name] = _fit_checked_sensor(problem, h, check, recal)
+        elif name == "initial_conditions" and speed is not None and speed["used"]:
+            fits[name] = _fit_fixed(problem, h, {"speed_offset": speed["offset"]},
+                                    {"speed_offset": speed["sigma"]}, recal)
         else:
             fits[name] = fit_variants(problem, h, start=recal.parameters)
     # error model from the residual of the most complete explanation (lowest RSS): correlated
@@ -552,6 +611,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
                                           base_rms > WITHIN_NOISE_RATIO),
         "score_window_s": list(problem.score_window),
         "sensor_check": check,
+        "impact_speed_check": speed,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
     # filtered noise, or far above it, is model-form error the catalogue does not cover

@@ -51,7 +51,7 @@ import numpy as np
 from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
 from crashdem.signal import Signal
 
-__all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS",
+__all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
            "cache_dir"]
 
@@ -248,6 +248,13 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
     except OSError:
         pass
     return sigs, info
+
+
+def impact_speed() -> float:
+    """Impact speed of the baseline scenario [m/s] (what the diagnosed simulation assumed)."""
+    from crashdem import scenario as sc
+
+    return float(sc.load(SCENARIO, dict(BASE_OVERRIDES)).impact_velocity)
 
 
 def dem_baseline(cache: Path | None = None) -> dict[str, Signal]:

@@ -165,3 +165,40 @@ def test_sensor_model_form_is_identified(form, label):
     assert h["scenario_overrides"]["physics.sensor_dynamics.model"] == label
     assert h["parameters"]["mount_frequency"] == pytest.approx(60.0, rel=0.15)
     assert h["parameters"]["mount_damping"] == pytest.approx(0.12, rel=0.30)
+
+
+@pytest.mark.parametrize("offset", [-3.0, 0.0, 2.2])
+def test_impact_speed_measured_from_the_free_fall(offset):
+    """Oracle: the truth's speed offset. With the baseline's impact speed given, the offset is
+    read from the recording's pre-contact free-fall velocity (``measured_impact_speed``): within
+    0.05 m/s of the truth, named as ``initial_conditions`` when it is there (within 2 %), and
+    nothing claimed when it is not."""
+    from crashdem.diagnosis.generator import acquire
+
+    truth = RomParams(speed_offset=offset)
+    rec = acquire(truth, np.random.default_rng(8), trigger_offset=-0.0015)
+    rep = diagnose(simulate(RomParams()), rec, impact_speed=RomParams().v0)
+    chk = rep.fit["impact_speed_check"]
+    assert chk["offset"] == pytest.approx(offset, abs=0.05)
+    assert chk["sigma"] < 0.1
+    if offset == 0.0:
+        assert rep.missing_physics is None
+    else:
+        assert rep.missing_physics == "initial_conditions"
+        h = next(x for x in rep.hypotheses if x["name"] == "initial_conditions")
+        assert h["parameters"]["speed_offset"] == pytest.approx(offset, rel=0.02)
+
+
+def test_impact_speed_of_another_convention_is_not_used():
+    """A velocity recorded down-positive gives a 'recorded impact speed' of the wrong sign: it
+    is reported with the reason and not used as a speed offset (no crash, no claim from it)."""
+    from crashdem.diagnosis.generator import acquire
+    from crashdem.signal import Signal
+
+    rec = acquire(RomParams(), np.random.default_rng(9))
+    v = rec["velocity_z"]
+    rec["velocity_z"] = Signal("velocity_z", v.t, -v.data, v.unit, v.cfc)
+    rep = diagnose(simulate(RomParams()), {"accel_z": rec["accel_z"], "velocity_z": rec["velocity_z"]},
+                   impact_speed=RomParams().v0, hypotheses=["initial_conditions"])
+    chk = rep.fit["impact_speed_check"]
+    assert chk["used"] is False and "50 %" in chk["reason"]

@@ -30,7 +30,7 @@ import numpy as np
 import pytest
 
 from crashdem.diagnosis import fit, screen_then_confirm
-from crashdem.diagnosis.generator_dem import DemFullSimulator, dem_concealed_case
+from crashdem.diagnosis.generator_dem import DemFullSimulator, dem_concealed_case, impact_speed
 
 #: effect types of the DEM truth (structural_crush: not available for the drop sphere)
 EFFECTS = ("soil_layering", "boundary_proximity", "initial_conditions", "sensor_dynamics",
@@ -63,7 +63,8 @@ def dem_runs():
         case = dem_concealed_case(seed, effect)
         t1 = time.perf_counter()
         full = DemFullSimulator()
-        rep = screen_then_confirm(case.baseline, case.recording, full, top_k=TOP_K)
+        rep = screen_then_confirm(case.baseline, case.recording, full, top_k=TOP_K,
+                                  impact_speed=impact_speed())
         out.append((case, rep, t1 - t0, time.perf_counter() - t1))
     conf = Counter((c.effect or "null", r.missing_physics or "none") for c, r, _, _ in out)
     top = Counter((c.effect or "null", r.hypotheses[0]["name"]) for c, r, _, _ in out)
