@@ -68,3 +68,11 @@ def test_channels_of_another_convention_are_not_compared():
     r = accel_velocity_check(rec["accel_z"], Signal("v", v.t, -v.data, "m/s", v.cfc))
     assert not r["applicable"] and not r.get("detected", False)
     assert "gain" in r["reason"]
+
+
+def test_wide_band_channels_are_not_checked():
+    """Above CFC 180 the check is not validated (false detections on wide-band DEM recordings):
+    it must say so instead of answering."""
+    rec = acquire(RomParams(), np.random.default_rng(6), cfc=1000.0)
+    r = accel_velocity_check(rec["accel_z"], rec["velocity_z"])
+    assert not r["applicable"] and "CFC" in r["reason"]
