@@ -124,6 +124,9 @@ class GliderBuildUp:
         Total assembled mass [kg]; thesis §2.2.1: 343.
     length, width, height, nose_length, aft_taper : float
         Fuselage shell geometry (see :func:`bodies.mesh.loft_fuselage`) [m], [-].
+    nose_droop : float
+        Side-view asymmetry of the nose, in [0, 1] (:func:`bodies.mesh.loft_fuselage`): 0 =
+        symmetric elliptic nose (default), 1 = straight floor line up to the nose tip.
     fabric_areal_density : float
         Dry fabric per unit shell area [kg/m^2]; schedule of thesis §2.2.1:
         1 x 1717 (0.160) + 6 x 1102 (0.280) + 2 x 1035 (0.200) = 2.240.
@@ -154,6 +157,7 @@ class GliderBuildUp:
     height: float = 0.8
     nose_length: float = 0.7
     aft_taper: float = 0.85
+    nose_droop: float = 0.0
     fabric_areal_density: float = 0.160 + 6 * 0.280 + 2 * 0.200
     resin_mass_fraction: float = 0.45
     dummy_mass: float = 77.0
@@ -186,6 +190,8 @@ class GliderBuildUp:
             val = getattr(self, name)
             if not (np.isfinite(val) and val > 0.0):
                 raise ValueError(f"GliderBuildUp.{name}={val!r}: must be > 0")
+        if not (np.isfinite(self.nose_droop) and 0.0 <= self.nose_droop <= 1.0):
+            raise ValueError(f"GliderBuildUp.nose_droop={self.nose_droop!r}: must be in [0, 1]")
         for name in ("dummy_mass", "side_mass", "heb_mass_each"):
             val = getattr(self, name)
             if not (np.isfinite(val) and val >= 0.0):
@@ -317,9 +323,11 @@ def glider_fuselage(
     bu = GliderBuildUp() if build_up is None else build_up
     if mesh_path is None:
         v, t, is_cap = loft_fuselage(bu.length, bu.width, bu.height, bu.nose_length,
-                                     n_stations, n_around, bu.aft_taper)
+                                     n_stations, n_around, bu.aft_taper, bu.nose_droop)
         mesh_note = (f"parametric loft: length {bu.length} m, width {bu.width} m, height "
                      f"{bu.height} m, elliptic nose {bu.nose_length} m, aft taper {bu.aft_taper}")
+        if bu.nose_droop:
+            mesh_note += f", nose droop {bu.nose_droop}"
     else:
         v, t = read_mesh(mesh_path, mesh_scale)
         is_cap = np.zeros(len(t), dtype=bool)

@@ -136,6 +136,7 @@ def loft_fuselage(
     n_stations: int = 28,
     n_around: int = 32,
     aft_taper: float = 0.85,
+    nose_droop: float = 0.0,
 ):
     """Parametric fuselage surface: a lofted body of elliptic sections with a blunt round nose.
 
@@ -158,6 +159,12 @@ def loft_fuselage(
     aft_taper : float
         Ratio of the section size at the cut to the maximum section (0 < r <= 1); the
         section shrinks linearly from the end of the nose to the cut.
+    nose_droop : float
+        Asymmetry of the nose in side view, in [0, 1]: the section centres of the nose lie
+        ``nose_droop * height/2 * (1 - f)`` below the axis (``f`` the nose's section scale), so
+        the nose tip is ``nose_droop * height/2`` below the axis. 0 = symmetric nose (tip on
+        the axis); 1 = straight floor line up to the tip (the whole nose curvature on the
+        upper, canopy side), as on a glider whose lower contour runs straight to the nose.
 
     Returns
     -------
@@ -176,6 +183,8 @@ def loft_fuselage(
         raise ValueError(f"loft_fuselage.nose_length={nose_length}: must be < length={length} [m]")
     if not 0.0 < aft_taper <= 1.0:
         raise ValueError(f"loft_fuselage.aft_taper={aft_taper!r}: must be in (0, 1]")
+    if not (np.isfinite(nose_droop) and 0.0 <= nose_droop <= 1.0):
+        raise ValueError(f"loft_fuselage.nose_droop={nose_droop!r}: must be in [0, 1] [-]")
     if n_stations < 4 or n_around < 8:
         raise ValueError(
             f"loft_fuselage: n_stations={n_stations} must be >= 4 and n_around={n_around} >= 8"
@@ -192,11 +201,13 @@ def loft_fuselage(
         1.0 - (1.0 - aft_taper) * (s - nose_length) / (length - nose_length),
     )
     phi = np.linspace(0.0, 2.0 * np.pi, n_around, endpoint=False)
-    verts = [np.zeros(3)]  # nose tip
-    for sk, fk in zip(s, scale):
+    # section centres below the axis on the nose (nose_droop), on the axis behind it
+    zc = np.where(s <= nose_length, -nose_droop * 0.5 * height * (1.0 - scale), 0.0)
+    verts = [np.array([0.0, 0.0, 0.0 - nose_droop * 0.5 * height])]  # nose tip
+    for sk, fk, zk in zip(s, scale, zc):
         ring = np.stack(
             [np.full(n_around, -sk), 0.5 * width * fk * np.cos(phi),
-             0.5 * height * fk * np.sin(phi)],
+             zk + 0.5 * height * fk * np.sin(phi)],
             axis=1,
         )
         verts.extend(ring)

@@ -77,10 +77,10 @@ WALL_DAMPING_RATIO = 0.05
 WALL_CONTACT_STIFFNESS = 2.0e8
 #: Damping ratio of the fuselage-wall penalty contact (composite skin crushing; assumption)
 WALL_CONTACT_DAMPING = 0.2
-#: Friction angle of the fuselage skin on the grains [deg]: glass/carbon-epoxy laminate on dry
-#: gravel, mu ~ 0.5-0.6 (assumption); the pair uses min(phi_skin, phi_soil) (Yade). The drop
-#: sphere's null impactor friction (thesis §3.1) is not carried over to the glider, whose nose
-#: slides up the slope during the primary impact.
+#: Default friction angle of the fuselage skin on the grains [deg] (``glider.skin_friction_deg``):
+#: glass/carbon-epoxy laminate on dry gravel, mu ~ 0.5-0.6 (assumption); the pair uses
+#: min(phi_skin, phi_soil) (Yade). The drop sphere's null impactor friction (thesis §3.1) is not
+#: carried over to the glider, whose nose slides up the slope during the primary impact.
 FUSELAGE_FRICTION_DEG = 30.0
 #: Time between the DEM start and the nominal first contact [s] (records the free flight)
 PRE_CONTACT_TIME = 0.02
@@ -350,7 +350,9 @@ class BodyWallContact:
         for name, point, normal, wall in self.walls:
             n = np.asarray(normal, dtype=float)
             p0 = np.asarray(point, dtype=float)
-            off = 0.0 if wall is None else -wall.u  # wall moved outward by u: plane at -u n
+            # wall moved outward (along -n) by u: plane through p0 - u n, so a vertex's
+            # penetration behind it is -(x - p0).n - u
+            off = 0.0 if wall is None else wall.u
             d = -((pts - p0) @ n) - off  # penetration behind the plane [m]
             inside = d > 0.0
             if not inside.any():
@@ -536,12 +538,15 @@ def glider_spec(scen: Scenario):
     kw: dict[str, Any] = {}
     if g["mesh"]:
         kw.update(mesh_path=g["mesh"], mesh_scale=g["mesh_scale"])
+    elif g["nose_droop"]:
+        kw["build_up"] = bodies.GliderBuildUp(nose_droop=g["nose_droop"])
     if scen["impactor.mass"] is not None:
         kw["mass"] = scen["impactor.mass"]
     if g["pitch_inertia"] is not None:
         kw["pitch_inertia"] = g["pitch_inertia"]
     if g["cg_from_nose"] is not None or g["cg_height"] is not None:
-        base = bodies.glider_fuselage(**{k: v for k, v in kw.items() if k.startswith("mesh")})
+        base = bodies.glider_fuselage(**{k: v for k, v in kw.items()
+                                         if k.startswith("mesh") or k == "build_up"})
         cg = np.array(base.cg_in_construction_frame, dtype=float)
         if g["cg_from_nose"] is not None:
             cg[0] = -g["cg_from_nose"]
@@ -599,6 +604,10 @@ def _check_scenario(scen: Scenario) -> None:
     if scen["glider.impact_height"] >= c["soil_depth"]:
         raise ScenarioError(f"glider.impact_height={scen['glider.impact_height']!r}: must be "
                             f"below the soil top container.soil_depth={c['soil_depth']!r} [m]")
+    if scen["glider.mesh"] and scen["glider.nose_droop"]:
+        raise ScenarioError(f"glider.nose_droop={scen['glider.nose_droop']!r}: must be 0 with "
+                            "glider.mesh (the mesh file defines the nose), allowed [0, 1] with "
+                            "the parametric loft")
     if c["soil_depth"] > c["height"]:
         raise ScenarioError(f"container.soil_depth={c['soil_depth']!r}: must be <= "
                             f"container.height={c['height']!r} [m]")
@@ -698,7 +707,8 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     packing = pk.cached(spec_p, cache_dir, progress=progress)
     mats = rn.impact_materials(scen, packing)
     wall_mat, imp_mat = len(packing.materials), len(packing.materials) + 1
-    mats[imp_mat] = replace(mats[imp_mat], friction_angle=math.radians(FUSELAGE_FRICTION_DEG),
+    mats[imp_mat] = replace(mats[imp_mat],
+                            friction_angle=math.radians(scen["glider.skin_friction_deg"]),
                             name="fuselage")
     particles = soil.Particles(x=packing.x, radius=packing.radius, material=packing.material,
                                rotation_blocked=rn._rotations_blocked(scen))
@@ -730,7 +740,13 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
         pitch += scen["physics.initial_conditions.pitch_offset_deg"]
     if speed <= 0:
         raise ScenarioError(f"glider.release_speed after offsets = {speed!r}: must be > 0 [m/s]")
-    rot = pitch_rotation(math.radians(pitch))
+    # pitch rate at release (nose-up positive): torque-free flight about the principal pitch
+    # axis keeps it constant, so the attitude grows linearly; impactor.pitch_deg is the
+    # attitude at release
+    q0 = math.radians(gl["release_pitch_rate_deg_s"])
+    omega0 = np.array([0.0, -q0, 0.0])  # world; nose-up = rotation about -y
+    t_ff = gl["free_flight_time"]
+    rot_contact = pitch_rotation(math.radians(pitch) + q0 * t_ff)
     a = math.radians(path)
     v_rel = speed * np.array([math.cos(a), 0.0, -math.sin(a)])
     alpha = math.radians(c["slope_deg"])
@@ -746,8 +762,7 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     delta = float(np.max(sd[near])) if near.any() else float(np.max(packing.radius))
     # contact point: on the envelope plane, at height zc; fuselage support point there
     x_contact_pt = x_lo + (math.cos(alpha) * zc - delta) / math.sin(alpha)
-    r_sup = _support_vertex(spec.vertices, rot, -n_out)
-    t_ff = gl["free_flight_time"]
+    r_sup = _support_vertex(spec.vertices, rot_contact, -n_out)
     # CG at contact, back to release (ballistic), forward to the DEM start
     # (velocity at contact = v_rel + g t_ff; the contact point lies on the plane at zc)
     x_cg_contact = np.array([x_contact_pt, 0.0, zc]) - r_sup
@@ -755,17 +770,21 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     t_start = max(t_ff - PRE_CONTACT_TIME, 0.0)
     x0, v0 = release_state(x_rel, v_rel, t_start, g)
     t_contact = t_ff - t_start
+    rot = pitch_rotation(math.radians(pitch) + q0 * t_start)  # attitude at the DEM start
 
     # with the crushable nose the fuselage (rear) and nose CGs are offset from the whole CG
     cg_whole = np.asarray(spec.cg_in_construction_frame, dtype=float)
-    x0_r = x0 + rot @ (np.asarray(rear.cg_in_construction_frame) - cg_whole)
-    body = coupling.boundary_for(rear, imp_mat, position=x0_r, rotation=rot, velocity=v0)
+    d_r = rot @ (np.asarray(rear.cg_in_construction_frame) - cg_whole)
+    x0_r, v0_r = x0 + d_r, v0 + np.cross(omega0, d_r)
+    body = coupling.boundary_for(rear, imp_mat, position=x0_r, rotation=rot, velocity=v0_r,
+                                 angular_velocity=omega0)
     boundaries = [fixed, body] + list(wall_bodies.values())
     nose_index = None
     if nose is not None:
-        x0_n = x0 + rot @ (np.asarray(nose.cg_in_construction_frame) - cg_whole)
-        boundaries.append(coupling.boundary_for(nose, imp_mat, position=x0_n, rotation=rot,
-                                                velocity=v0))
+        d_n = rot @ (np.asarray(nose.cg_in_construction_frame) - cg_whole)
+        boundaries.append(coupling.boundary_for(nose, imp_mat, position=x0 + d_n, rotation=rot,
+                                                velocity=v0 + np.cross(omega0, d_n),
+                                                angular_velocity=omega0))
         nose_index = len(boundaries) - 1
         if scen["solver.exchange_every"] != 1:
             raise ScenarioError(f"solver.exchange_every={scen['solver.exchange_every']!r}: "
@@ -778,13 +797,14 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
         sim.bond_contacts()
     if nose is None:
         model = bodies.ExudynRigidBody(spec, position=x0, rotation=rot, velocity=v0,
-                                       gravity=tuple(g))
+                                       angular_velocity=omega0, gravity=tuple(g))
     else:
         from bodies.crush import ExudynCrushableBody
 
         model = ExudynCrushableBody(rear, nose, scen["physics.structural_crush.crush_force"],
                                     scen["physics.structural_crush.stroke"], sim.dt,
-                                    position=x0_r, rotation=rot, velocity=v0, gravity=tuple(g))
+                                    position=x0_r, rotation=rot, velocity=v0_r,
+                                    angular_velocity=omega0, gravity=tuple(g))
     cosim = coupling.CoSimulation(sim, 1, model, exchange_every=scen["solver.exchange_every"])
 
     walls = {name: CompliantWall(name, panels[name], wall_bodies[name], -np.asarray(n))
@@ -855,8 +875,9 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     surface_z = zc
     extra = {"walls": walls, "contact": contact, "panels": panels, "release_position": x_rel,
              "release_velocity": v_rel, "release_time": -t_start, "t_start_after_release": t_start,
-             "grain_envelope": delta, "contact_point_body": r_sup @ rot,
-             "pitch0": math.radians(pitch), "slope_normal": n_out,
+             "grain_envelope": delta, "contact_point_body": r_sup @ rot_contact,
+             "pitch0": math.radians(pitch), "release_pitch_rate": q0,
+             "pitch_contact": math.radians(pitch) + q0 * t_ff, "slope_normal": n_out,
              "nose_contact": nose_contact, "nose_index": nose_index, "whole_spec": spec}
     # stateful parts outside the DEM, the coupling and the sensors (restart checkpoints,
     # crashdem.checkpoint): every such object goes here, named

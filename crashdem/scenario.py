@@ -195,6 +195,9 @@ SCHEMA: dict[str, Any] = {
         "pitch_inertia": F(None, "kg*m^2", 0, None, lo_open=True, doc="override: pitch moment of inertia about the CG", nullable=True),
         "mesh": S("", doc="fuselage surface mesh file (STL/OBJ/VTU...); empty = parametric mesh"),
         "mesh_scale": F(1.0, "1", 0, None, lo_open=True, doc="scale of the mesh file's units to m (1e-3 for mm)"),
+        "nose_droop": F(0.0, "1", 0, 1, doc="side-view asymmetry of the parametric nose: tip nose_droop x height/2 below the axis (0 = symmetric elliptic nose, 1 = straight floor line to the tip); ignored with glider.mesh"),
+        "skin_friction_deg": F(30.0, "deg", 0, 90, hi_open=True, doc="friction angle of the fuselage skin on the grains (the pair uses min(skin, soil)); composite on gravel mu 0.3-0.6, i.e. 17-31 deg"),
+        "release_pitch_rate_deg_s": F(0.0, "deg/s", -360, 360, doc="pitch rate at release from the sled, nose-up positive (sled braking through supports below the CG gives a nose-down rate); impactor.pitch_deg is the attitude at release"),
     },
     "impactor": {
         "body": C("drop_sphere", "drop_sphere", "glider", doc="the rigid impactor"),

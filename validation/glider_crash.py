@@ -15,7 +15,11 @@ Sensitivity studies (``--studies``, 0.1 m grains whatever the mode): compaction 
 (horizontal layers vs layers normal to the slope, thesis §2.4), container size (the ideal 4.8 m
 vs the real one, width kept), particle size (0.1 vs 0.08 m), and the pitch-up diagnosis: pitch
 inertia 2x / 4x the build-up's (the whole aircraft's, thesis Tab. 2.3), crushable nose with
-and without it. One change at a time from the small baseline (docs/glider.md).
+and without it; and the candidate ingredients of the pitch-up (docs/glider.md "What would make
+the fuselage penetrate"): a nose-down pitch rate at release, the nose's side-view asymmetry
+(``glider.nose_droop``), a lower skin friction, free grain rotations with rolling resistance, a
+looser upper layer, the card's (drop tank's) compaction height. One change at a time from the
+small baseline (docs/glider.md).
 
 Usage::
 
@@ -25,8 +29,11 @@ Usage::
     python validation/glider_crash.py --set physics.structural_crush.enabled=true  # crushable nose
 
 The soil card ``validation/soil_cards/calibrated_gravel.toml`` is used when it exists (unless
-``--no-card``); otherwise the drop scenarios' soil of the scenario file. The LAST printed line is
-JSON with ``peak_ax_g``, ``second_peak_ax_g``, ``t_peaks_s``, ``pitch_min_deg``,
+``--no-card``); otherwise the drop scenarios' soil of the scenario file. The card's soil
+properties are applied; its upper-layer thickness (``physics.soil_layering.depth``, the drop
+tank's re-worked layer) is not: the glider container's compaction geometry is the scenario's
+(thesis §2.2.2: compacted up to ~1 m above the floor), unless ``--card-layer-depth``. The LAST
+printed line is JSON with ``peak_ax_g``, ``second_peak_ax_g``, ``t_peaks_s``, ``pitch_min_deg``,
 ``pitch_max_deg``, ``duration_s``, ``wall_s`` (+ ``checks``, ``errors``, ``studies``...).
 """
 from __future__ import annotations
@@ -49,6 +56,12 @@ from validation.campaign.calibration import load_soil_card  # noqa: E402
 
 SCENARIO = ROOT / "validation" / "scenarios" / "glider_real.toml"
 CARD = ROOT / "validation" / "soil_cards" / "calibrated_gravel.toml"
+#: Card keys describing where the drop tank's compaction stopped, not the soil itself: the
+#: glider container's compaction height is a property of its filling (thesis §2.2.2: the
+#: compaction failed once the soil was ~1 m thick; §2.4: acceptable compaction at the 0.85 m
+#: impact point), kept from the scenario (``physics.soil_layering.depth`` = 1.4 m below the
+#: 2.4 m top, i.e. compacted up to 1.0 m) unless ``--card-layer-depth`` (docs/glider.md)
+CARD_CONTAINER_KEYS = ("physics.soil_layering.depth",)
 DEFAULT_CACHE = Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem")) \
     / "packings"
 #: Overrides per mode. small: 0.1 m grains (~800 in the slope), no snapshots/plots.
@@ -78,8 +91,10 @@ PLANAR_WINDOW = 0.05
 
 
 def checks(sig: dict, spec_mass: float, mounts: dict, t_contact: float, full_scale_g: float,
-           nose_mass: float | None = None) -> dict:
-    """Physics checks of a record (raw channels); each entry holds the numbers compared."""
+           nose_mass: float | None = None, release_rate: float = 0.0) -> dict:
+    """Physics checks of a record (raw channels); each entry holds the numbers compared.
+    ``release_rate``: the pitch rate given at release [rad/s] (``glider.release_pitch_rate_deg_s``),
+    which the free-flight gyro must keep."""
     from crashdem.glider import G0, kinematic_identity
     from crashdem.signal import Signal
 
@@ -112,7 +127,9 @@ def checks(sig: dict, spec_mass: float, mounts: dict, t_contact: float, full_sca
     out["pitch_excursion_deg"] = float(np.degrees(np.max(np.abs(th - th[0]))))
     q = sig["pitch_rate"].data
     pre = t < t_contact
-    out["free_flight_rate_max"] = float(np.max(np.abs(q[pre]))) if pre.any() else float("nan")
+    # torque-free flight: the gyro keeps the release rate (max deviation from it)
+    out["free_flight_rate_max"] = (float(np.max(np.abs(q[pre] - release_rate))) if pre.any()
+                                   else float("nan"))
     out["free_flight_samples"] = int(pre.sum())
     # unclipped nose z specific force from the rear channel and the gyro (planar rigid body:
     # f_front_z = f_rear_z + dx q', dx = front - rear station along the body x axis)
@@ -169,7 +186,8 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
     mounts = {m.name: m.position for m in spec.sensors}
     ch = checks(sig, spec.mass, mounts, feats["t_first_contact_s"],
                 scen["instrumentation.accel_full_scale_g"],
-                None if nose_spec is None else nose_spec.mass)
+                None if nose_spec is None else nose_spec.mass,
+                math.radians(scen["glider.release_pitch_rate_deg_s"]))
     walls = {}
     for name in ("rear_wall", "left_wall", "right_wall"):
         walls[name] = {"max_force_N": float(np.max(sig[f"{name}_force"].data)),
@@ -249,13 +267,36 @@ def study_cases() -> list[tuple[str, str, dict]]:
         if rad != COARSE["soil.radius"]:
             cases.append(("particle_size", f"{rad:g}", {"soil.radius": rad}))
     cases.append(("container_size", "ideal_4.8m", dict(IDEAL)))
+    # why the fuselage rides up the slope (docs/glider.md, "What would make it penetrate"):
+    # one candidate ingredient at a time
+    cases.append(("release_rate", f"{RELEASE_RATE_STUDY:g}deg_s",
+                  {"glider.release_pitch_rate_deg_s": RELEASE_RATE_STUDY}))
+    for d in NOSE_DROOP_STUDY:
+        cases.append(("nose_shape", f"droop_{d:g}", {"glider.nose_droop": d}))
+    cases.append(("skin_friction", f"{SKIN_FRICTION_STUDY:g}deg",
+                  {"glider.skin_friction_deg": SKIN_FRICTION_STUDY}))
+    cases.append(("particle_rotation", "free_mu0.1",
+                  {"soil.rotation": "free", "soil.rolling_coefficient": 0.1}))
+    cases.append(("upper_layer", "porosity_0.44", {"soil.porosity_target": 0.44}))
+    cases.append(("compaction_height", "card_0.6m", {"physics.soil_layering.depth": 0.6}))
     return cases
 
 
-#: Baseline label of each study (the small run: real container, horizontal layers, 0.1 m
-#: grains, rigid fuselage, build-up pitch inertia)
+#: Candidate ingredients of the pitch-up study: a nose-down pitch rate at release [deg/s]
+#: (thesis §2.2.4: negative pitch first), the nose's side-view asymmetry (glider.nose_droop),
+#: a composite-on-gravel skin friction of mu 0.3 [deg]
+RELEASE_RATE_STUDY = -50.0
+NOSE_DROOP_STUDY = (0.5, 1.0)
+SKIN_FRICTION_STUDY = 17.0
+
+#: Baseline label of each study (the small run: real container, horizontal layers compacted
+#: up to 1.0 m, 0.1 m grains, rigid fuselage, build-up pitch inertia, symmetric nose, zero
+#: release rate, skin friction 30 deg, blocked grain rotations, upper layer as deposited)
 BASELINE_LABEL = {"pitch_inertia": "1x", "crushable_nose": "off", "compaction": "horizontal",
-                  "particle_size": "0.1", "container_size": "real"}
+                  "particle_size": "0.1", "container_size": "real", "release_rate": "0deg_s",
+                  "nose_shape": "symmetric", "skin_friction": "30deg",
+                  "particle_rotation": "blocked", "upper_layer": "as_deposited",
+                  "compaction_height": "1.0m"}
 
 
 def _study_features(r: dict) -> dict:
@@ -311,6 +352,19 @@ def _clean(x):
     return x
 
 
+def card_overrides(card: dict, layer_depth: bool = False, ignored: dict | None = None) -> dict:
+    """The soil card's overrides for the glider: all of them with ``layer_depth``, else without
+    ``CARD_CONTAINER_KEYS`` (collected in ``ignored``)."""
+    out = dict(card)
+    if not layer_depth:
+        for k in CARD_CONTAINER_KEYS:
+            if k in out:
+                v = out.pop(k)
+                if ignored is not None:
+                    ignored[k] = v
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--small", action="store_true", help="reduced resolution (test suite)")
@@ -319,6 +373,9 @@ def main(argv=None) -> int:
                     choices=sorted(BASELINE_LABEL),
                     help="with --studies: run only this study (repeatable)")
     ap.add_argument("--no-card", action="store_true", help="ignore the calibrated soil card")
+    ap.add_argument("--card-layer-depth", action="store_true",
+                    help="also take the card's upper-layer thickness (the drop tank's) instead "
+                         "of the glider container's compaction height")
     ap.add_argument("--out", type=Path, default=Path("runs/glider_crash"))
     ap.add_argument("--cache", type=Path, default=DEFAULT_CACHE, help="packing cache")
     ap.add_argument("--threads", type=int, default=0, help="Numba threads (0 = scenario)")
@@ -332,8 +389,9 @@ def main(argv=None) -> int:
     mode = "small" if args.small else "default"
     base = dict(MODES[mode])
     card = None
+    card_ignored: dict = {}
     if CARD.exists() and not args.no_card:
-        base.update(load_soil_card(CARD))
+        base.update(card_overrides(load_soil_card(CARD), args.card_layer_depth, card_ignored))
         card = str(CARD)
     if args.threads:
         base["scenario.threads"] = args.threads
@@ -353,7 +411,8 @@ def main(argv=None) -> int:
           f"contact, pitch min {f['pitch_min_deg']:.3g} deg", flush=True)
     report = {k: f[k] for k in ("peak_ax_g", "second_peak_ax_g", "t_peaks_s", "pitch_min_deg",
                                 "pitch_max_deg", "duration_s")}
-    report.update(mode=mode, soil_card=card, particles=r["particles"], dt=r["dt"],
+    report.update(mode=mode, soil_card=card, soil_card_keys_not_applied=card_ignored,
+                  particles=r["particles"], dt=r["dt"],
                   hdf5=r["hdf5"], checks=r["checks"], errors=_errors(f), walls=r["walls"],
                   t_first_contact_s=f["t_first_contact_s"])
     if args.studies:

@@ -202,3 +202,94 @@ def test_crash_features_on_synthetic_double_pulse():
     # zero-phase symmetric smearing (no net area change)
     assert f["pitch_max_deg"] == pytest.approx(math.degrees(0.1 * (t[-1] - t_c)), rel=1e-2)
     assert f["free_flight_rate_max"] == 0.0
+
+
+def test_loft_nose_droop_geometry():
+    """Oracle: the drooped loft by construction. nose_droop = 0 is the symmetric loft
+    (bit-identical); with nose_droop = d the tip lies d h/2 below the axis, every nose section
+    keeps its size and is shifted down by d h/2 (1 - f) (f its scale), so with d = 1 the lowest
+    point of every nose ring is on the floor line z = -h/2 (straight lower contour); the
+    sections behind the nose are unchanged."""
+    from bodies.mesh import loft_fuselage
+
+    h, ln = 0.8, 0.7
+    v0, t0, c0 = loft_fuselage()
+    vz, tz, cz = loft_fuselage(nose_droop=0.0)
+    assert np.array_equal(v0, vz) and np.array_equal(t0, tz) and np.array_equal(c0, cz)
+    for d in (0.5, 1.0):
+        v, t, _ = loft_fuselage(nose_droop=d)
+        assert np.array_equal(t, t0)
+        assert v[0] == pytest.approx([0.0, 0.0, -d * 0.5 * h], abs=1e-15)
+        s = -v0[:, 0]
+        aft = s > ln + 1e-12
+        assert np.array_equal(v[aft], v0[aft])
+        nose = ~aft
+        assert np.array_equal(v[nose, :2], v0[nose, :2])  # sizes unchanged
+        f = np.sqrt(np.clip(1.0 - (1.0 - s[nose] / ln) ** 2, 0.0, 1.0))
+        assert v[nose, 2] - v0[nose, 2] == pytest.approx(-d * 0.5 * h * (1.0 - f), abs=1e-12)
+    v1, _, _ = loft_fuselage(nose_droop=1.0)
+    ring_min = [v1[np.abs(v1[:, 0] - x) < 1e-12, 2].min() for x in np.unique(v1[:, 0])
+                if -x <= ln]
+    assert ring_min == pytest.approx([-0.5 * h] * len(ring_min), abs=1e-12)
+
+
+def test_pitch_up_keys_validation_names_field():
+    """The new glider keys are range-checked by the schema (field, allowed range in the
+    message), the loft and the build-up check nose_droop, and nose_droop with a mesh file is
+    refused (the mesh defines the nose)."""
+    import bodies
+    from bodies.mesh import loft_fuselage
+    from crashdem import scenario as sc
+    from crashdem.glider import _check_scenario, glider_spec
+
+    with pytest.raises(sc.ScenarioError,
+                       match=r"glider.release_pitch_rate_deg_s=400.0: must be in \[-360, 360\]"):
+        sc.loads("", {"glider.release_pitch_rate_deg_s": 400.0})
+    with pytest.raises(sc.ScenarioError,
+                       match=r"glider.skin_friction_deg=90.0: must be in \[0, 90\) \[deg\]"):
+        sc.loads("", {"glider.skin_friction_deg": 90.0})
+    with pytest.raises(sc.ScenarioError, match=r"glider.nose_droop=1.5: must be in \[0, 1\]"):
+        sc.loads("", {"glider.nose_droop": 1.5})
+    with pytest.raises(ValueError, match=r"loft_fuselage.nose_droop=-0.1: must be in \[0, 1\]"):
+        loft_fuselage(nose_droop=-0.1)
+    with pytest.raises(ValueError, match=r"GliderBuildUp.nose_droop=2: must be in \[0, 1\]"):
+        bodies.GliderBuildUp(nose_droop=2)
+    base = {"scenario.kind": "glider_crash", "container.shape": "box", "container.length": 2.4,
+            "container.width": 2.0, "container.height": 2.4, "container.soil_depth": 2.4,
+            "container.slope_deg": 45.0, "impactor.body": "glider"}
+    scen = sc.loads("", {**base, "glider.nose_droop": 1.0})
+    _check_scenario(scen)
+    spec = glider_spec(scen)
+    v = spec.vertices + np.asarray(spec.cg_in_construction_frame)
+    assert v[np.argmax(v[:, 0])][2] == pytest.approx(-0.4, abs=1e-12)
+    with pytest.raises(sc.ScenarioError,
+                       match=r"glider.nose_droop=1.0: must be 0 with glider.mesh"):
+        _check_scenario(sc.loads("", {**base, "glider.nose_droop": 1.0, "glider.mesh": "x.stl"}))
+
+
+class _MovedWall:
+    """A CompliantWall stand-in: panel displaced outward by ``u`` [m]."""
+
+    def __init__(self, u, modal_mass=100.0):
+        self.u = u
+        self.panel = type("P", (), {"modal_mass": modal_mass})()
+
+
+def test_body_wall_contact_follows_the_displaced_panel():
+    """Oracle: geometry of the moved plane. The rear panel (plane x = 1, particle-side normal
+    -x) displaced outward by u = 2 mm sits at x = 1.002: a vertex at x = 1.003 penetrates it by
+    1 mm (F = k 1 mm), a vertex at x = 1.0015 not at all; a panel pushed inward (u = -2 mm)
+    meets the vertex at 5 mm. (A panel receding under the load must relieve the contact, or
+    the secondary impact on the rear wall runs away.)"""
+    verts = np.array([[1.003, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    for u, d in ((0.002, 0.001), (-0.002, 0.005)):
+        c = BodyWallContact(verts, 300.0, [("rear", (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0),
+                                            _MovedWall(u))], stiffness=1.0e8, damping_ratio=0.0)
+        f, _, loads = c.evaluate(0.0, np.zeros(3), np.eye(3), np.zeros(3), np.zeros(3))
+        assert f == pytest.approx([-1.0e8 * d, 0.0, 0.0], rel=1e-9)
+        assert loads["rear"] == pytest.approx(1.0e8 * d, rel=1e-9)
+    c = BodyWallContact(np.array([[1.0015, 0.0, 0.0]]), 300.0,
+                        [("rear", (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0), _MovedWall(0.002))],
+                        stiffness=1.0e8, damping_ratio=0.0)
+    f, _, loads = c.evaluate(0.0, np.zeros(3), np.eye(3), np.zeros(3), np.zeros(3))
+    assert not f.any() and loads["rear"] == 0.0

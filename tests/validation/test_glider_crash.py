@@ -210,3 +210,110 @@ def test_studies_cover_the_issue_and_reach_the_model():
             if nose is not None:
                 assert rear.inertia[1, 1] < whole.inertia[1, 1]
                 assert rear.inertia[1, 1] > 0.9 * whole.inertia[1, 1]
+
+
+# ---------------------------------------------------------------------------------------------
+# the pitch-up candidates (docs/glider.md "What would make the fuselage penetrate"): release
+# pitch rate, skin friction and nose shape reach the model
+# ---------------------------------------------------------------------------------------------
+RELEASE_RATE_DEG_S = -50.0  # nose-down, as the test's "negative pitch first" implies
+RATE_T_END = 0.03  # [s] after the first contact
+
+
+@pytest.fixture(scope="module")
+def rate_report(report):
+    """The small run with a nose-down pitch rate at release, reusing the packing."""
+    out = Path(report["hdf5"]).parent.parent
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "validation" / "glider_crash.py"), "--small", "--no-card",
+         "--out", str(out), "--set", f"glider.release_pitch_rate_deg_s={RELEASE_RATE_DEG_S}",
+         "--set", f"solver.t_end={RATE_T_END}", "--set", "scenario.name=glider_small_rate"],
+        capture_output=True, text=True, timeout=900, cwd=ROOT)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_free_flight_keeps_the_release_pitch_rate(rate_report):
+    """Oracle: torque-free rigid body about a principal axis (Euler's equations): the gyro
+    reads the release rate until the first contact, and the gyro integral from the start of
+    the record (the laboratory's pitch) reaches q0 (t_contact - t_start) = q0 x 20 ms there,
+    the "negative pitch first" of the test; the exact pitch equals the integral."""
+    from crashdem.glider import PRE_CONTACT_TIME
+    from crashdem.results import open_result
+
+    c = rate_report["checks"]
+    assert c["free_flight_samples"] > 100
+    assert c["free_flight_rate_max"] < 1e-9  # deviation from the release rate [rad/s]
+    q0 = math.radians(RELEASE_RATE_DEG_S)
+    with open_result(rate_report["hdf5"]) as res:
+        sig = res.signals(filtered=False)
+    t = sig["pitch_rate"].t
+    qr, labr, exr = (sig[k].data for k in ("pitch_rate", "pitch_angle_lab", "pitch_angle"))
+    t1 = rate_report["t_first_contact_s"]
+    pre = t < t1
+    assert np.max(np.abs(qr[pre] - q0)) < 1e-9
+    n = int(np.searchsorted(t, t1)) - 1
+    # the gyro integral and the exact attitude grow by q0 dt up to the sample before contact
+    assert labr[n] - labr[0] == pytest.approx(q0 * (t[n] - t[0]), rel=1e-6)
+    assert exr[n] - exr[0] == pytest.approx(q0 * (t[n] - t[0]), rel=1e-6)
+    # attitude at the DEM start: the release attitude (0) plus q0 x (free flight - 20 ms)
+    # (the sensors may read the coupled state staggered by half a DEM step)
+    assert exr[0] == pytest.approx(q0 * (0.05 - PRE_CONTACT_TIME), abs=abs(q0) * rate_report["dt"])
+    assert rate_report["pitch_min_deg"] <= math.degrees(q0) * 0.019
+
+
+def test_pitch_up_keys_reach_the_model(report):
+    """The new glider keys reach the coupled model built on the run's packing: the fuselage
+    material's friction angle (glider.skin_friction_deg; the pair then uses min(skin, soil)),
+    the release rate on the Exudyn body and its DEM boundary (world omega = (0, -q0, 0),
+    nose-up about -y), the attitude at the DEM start, and the drooped nose (its tip
+    nose_droop x height/2 below the axis) as the contact mesh."""
+    sys.path.insert(0, str(ROOT))
+    import validation.glider_crash as gc
+    from crashdem import scenario as sc
+    from crashdem.glider import PRE_CONTACT_TIME, build_glider_model
+
+    ov = {**gc.MODES["small"], "glider.skin_friction_deg": 17.0,
+          "glider.release_pitch_rate_deg_s": RELEASE_RATE_DEG_S, "glider.nose_droop": 0.5}
+    scen = sc.load(gc.SCENARIO, ov)
+    m = build_glider_model(scen, Path(report["hdf5"]).parent / "packings")
+    q0 = math.radians(RELEASE_RATE_DEG_S)
+    fus = m.sim.materials[m.sim.boundaries[1].material]
+    assert fus.name == "fuselage"
+    assert math.degrees(fus.friction_angle) == pytest.approx(17.0, rel=1e-12)
+    assert m.model.angular_velocity() == pytest.approx([0.0, -q0, 0.0], abs=1e-12)
+    assert np.asarray(m.sim.boundaries[1].angular_velocity) == pytest.approx([0.0, -q0, 0.0],
+                                                                            abs=1e-12)
+    th0 = q0 * (scen["glider.free_flight_time"] - PRE_CONTACT_TIME)
+    r = np.asarray(m.sim.boundaries[1].rotation)  # the DEM body at the DEM start
+    assert math.atan2(r[2, 0], r[0, 0]) == pytest.approx(th0, rel=1e-9)
+    r = m.model.rotation()  # Exudyn: staggered by the coupling's half step at most
+    assert math.atan2(r[2, 0], r[0, 0]) == pytest.approx(th0, abs=abs(q0) * m.sim.dt)
+    v = m.spec.vertices + np.asarray(m.spec.cg_in_construction_frame)  # construction frame
+    tip = v[np.argmax(v[:, 0])]
+    assert tip[0] == pytest.approx(0.0, abs=1e-12)
+    assert tip[2] == pytest.approx(-0.5 * 0.5 * 0.8, abs=1e-12)
+
+
+def test_card_layer_depth_is_the_containers():
+    """The soil card's upper-layer thickness (where the drop tank's compaction stopped) is not
+    applied to the glider container unless asked: the packing keeps the scenario's compaction
+    height (thesis §2.2.2: compacted up to ~1 m above the floor), while the card's soil
+    properties are applied."""
+    sys.path.insert(0, str(ROOT))
+    import validation.glider_crash as gc
+    from crashdem import run as rn
+    from crashdem import scenario as sc
+
+    card = {"soil.material.young": 4.6e6, "physics.soil_layering.enabled": True,
+            "physics.soil_layering.depth": 0.6, "physics.soil_layering.lower_young_factor": 2.3}
+    ignored: dict = {}
+    ov = gc.card_overrides(card, ignored=ignored)
+    assert ignored == {"physics.soil_layering.depth": 0.6}
+    assert "physics.soil_layering.depth" not in ov and ov["soil.material.young"] == 4.6e6
+    assert gc.card_overrides(card, layer_depth=True) == card
+    scen = sc.load(gc.SCENARIO, {**gc.MODES["small"], **ov})
+    lower, upper = rn.packing_spec(scen).layers
+    assert lower.thickness == pytest.approx(1.0, abs=1e-12)  # compacted up to 1.0 m
+    assert upper.thickness == pytest.approx(1.4, abs=1e-12)
+    assert scen["soil.material.young"] == 4.6e6
