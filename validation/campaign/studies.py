@@ -37,7 +37,7 @@ SPEEDS = {
 #: Resolution presets (scenario overrides).  "small": 0.10 m grains in a 2.0 m tank (about
 #: 800 grains, for the test suite); the spread is 0.1 instead of 0.2 because the packing's
 #: porosity-trial column cannot hold the 0.2-spread lattice (reported to the soil owner).
-#: "default": the scenario files as written (0.05 m grains, 3.0 m tank).
+#: "default": the scenario files as written (0.075 m grains, 6.0 m tank, about 16,300 grains).
 RESOLUTIONS: dict[str, dict] = {
     "small": {"soil.radius": 0.10, "soil.radius_spread": 0.10, "container.diameter": 2.0,
               "solver.t_end": 0.12},
