@@ -180,7 +180,9 @@ def diagnose_command(args: argparse.Namespace) -> int:
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
             from crashdem.diagnosis.distributed import full_simulator_from_args
 
-            full = full_simulator_from_args(args, scen, cmap)  # type: ignore[assignment]
+            local = full
+            full = _LocalFallback(full_simulator_from_args(args, scen, cmap), local,  # type: ignore[assignment]
+                                  lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom")
         if hasattr(full, "describe"):
@@ -194,6 +196,41 @@ def diagnose_command(args: argparse.Namespace) -> int:
     for p in paths["plots"]:
         print(p)
     return 0
+
+
+class _LocalFallback:
+    """The Dask confirmation simulator, falling back to runs in this process when the cluster
+    cannot be used at all (it does not start, the scheduler is unreachable); failed *runs*
+    (``RuntimeError`` naming them) are not retried here: the confirmation reports them."""
+
+    def __init__(self, dask_sim, local, prepare_local):
+        self.dask, self.local, self.prepare_local = dask_sim, local, prepare_local
+        self.fallback_reason: str | None = None
+
+    def map(self, batch):
+        if self.fallback_reason is None:
+            try:
+                return self.dask.map(batch)
+            except RuntimeError:
+                raise
+            except Exception as e:  # noqa: BLE001 - any cluster start-up / transport failure
+                self.fallback_reason = f"{type(e).__name__}: {e}"
+                import logging
+
+                logging.getLogger(__name__).warning(
+                    "diagnose: Dask confirmation unavailable (%s); running the full simulations "
+                    "in this process", self.fallback_reason)
+                self.prepare_local()
+        return [self.local(ov) for ov in batch]
+
+    def __call__(self, overrides):
+        return self.map([overrides])[0]
+
+    def describe(self):
+        d = dict(self.dask.describe()) if hasattr(self.dask, "describe") else {}
+        if self.fallback_reason is not None:
+            d["fallback_in_process"] = self.fallback_reason
+        return d
 
 
 #: full simulations of the default confirmation (the recalibrated run + the two best candidates)

@@ -123,3 +123,29 @@ def test_channel_map_finds_channels_of_other_codes():
         _channel_map(None, {"p": s("Pa")})
     with pytest.raises(ValueError, match="a1"):
         _channel_map(None, {"a1": s("g"), "a2": s("g")})
+
+
+def test_confirmation_falls_back_to_local_runs_when_the_cluster_is_unusable():
+    """A Dask simulator that cannot start (OSError) hands the batch to the in-process runner
+    once and says why; a failed run (RuntimeError) is not masked."""
+    from crashdem.diagnosis.cli import _LocalFallback
+
+    class Broken:
+        def map(self, batch):
+            raise OSError("no free port")
+
+        def describe(self):
+            return {"scheduler": None}
+
+    prepared = []
+    fb = _LocalFallback(Broken(), lambda ov: {"ran": ov}, lambda: prepared.append(1))
+    assert fb.map([{"a": 1}, {"a": 2}]) == [{"ran": {"a": 1}}, {"ran": {"a": 2}}]
+    assert fb({"a": 3}) == {"ran": {"a": 3}}
+    assert prepared == [1] and "OSError: no free port" in fb.describe()["fallback_in_process"]
+
+    class Failing:
+        def map(self, batch):
+            raise RuntimeError("full-simulation confirmation: 1 of 1 runs failed")
+
+    with pytest.raises(RuntimeError, match="runs failed"):
+        _LocalFallback(Failing(), lambda ov: ov, lambda: None).map([{}])
