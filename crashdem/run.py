@@ -201,20 +201,11 @@ def _impactor_spec(scen: Scenario):
 
 
 def sensor_dynamics(scen: Scenario):
-    """``(cfc, dynamics)`` of the accelerometer channels: the instrumentation CFC and no mount
-    model, unless ``physics.sensor_dynamics`` is on (then its ``MountDynamics`` and, when given,
-    its CFC class)."""
+    """``(cfc, dynamics)`` of the accelerometer channels (``sensors.dynamics_from_scenario``):
+    the instrumentation CFC and no mount model, unless ``physics.sensor_dynamics`` is on."""
     from crashdem import sensors as sn
 
-    cfc = scen["instrumentation.cfc"]
-    dyn = None
-    if scen["physics.sensor_dynamics.enabled"]:
-        dyn = sn.MountDynamics(scen["physics.sensor_dynamics.natural_frequency"],
-                               scen["physics.sensor_dynamics.damping_ratio"],
-                               scen["physics.sensor_dynamics.model"])
-        if scen["physics.sensor_dynamics.cfc"] is not None:
-            cfc = scen["physics.sensor_dynamics.cfc"]
-    return cfc, dyn
+    return sn.dynamics_from_scenario(scen)
 
 
 def _sensor_set(scen: Scenario, spec, floor_name: str, body_name: str):

@@ -139,6 +139,7 @@ __all__ = [
     "Gyroscope",
     "LoadCell",
     "MountDynamics",
+    "dynamics_from_scenario",
     "PITCH_AXIS",
     "PitchAngle",
     "PointKinematics",
@@ -1229,6 +1230,22 @@ def sensors_for_body(mounts: Sequence[Any], body: str, *, cfc: float | None = No
     return out
 
 
+def dynamics_from_scenario(scenario: Any) -> tuple[float | None, MountDynamics | None]:
+    """``(cfc, dynamics)`` of the accelerometer channels a scenario asks for: the
+    instrumentation CFC and no sensor model, unless ``physics.sensor_dynamics`` is on (then its
+    ``MountDynamics`` -- natural frequency, damping ratio, model -- and, when set, its CFC
+    class). ``scenario`` needs ``get("dotted.key")``."""
+    cfc = scenario.get("instrumentation.cfc")
+    if not scenario.get("physics.sensor_dynamics.enabled"):
+        return cfc, None
+    dyn = MountDynamics(
+        natural_frequency=float(scenario.get("physics.sensor_dynamics.natural_frequency")),
+        damping_ratio=float(scenario.get("physics.sensor_dynamics.damping_ratio")),
+        model=str(scenario.get("physics.sensor_dynamics.model") or "lowpass"))
+    cfc_dyn = scenario.get("physics.sensor_dynamics.cfc")
+    return (cfc if cfc_dyn is None else cfc_dyn), dyn
+
+
 def sensor_set_from_scenario(scenario: Any, mounts: Sequence[Any], body: str = "impactor",
                              load_cells: Sequence[LoadCell] = (),
                              gravity: Sequence[float] = (0.0, 0.0, -9.81),
@@ -1254,16 +1271,7 @@ def sensor_set_from_scenario(scenario: Any, mounts: Sequence[Any], body: str = "
     from crashdem.signal import G0
 
     fs = float(scenario.get("instrumentation.sample_rate"))
-    cfc = scenario.get("instrumentation.cfc")
-    dyn = None
-    if scenario.get("physics.sensor_dynamics.enabled"):
-        dyn = MountDynamics(
-            natural_frequency=float(scenario.get("physics.sensor_dynamics.natural_frequency")),
-            damping_ratio=float(scenario.get("physics.sensor_dynamics.damping_ratio")),
-            model=str(scenario.get("physics.sensor_dynamics.model") or "lowpass"))
-        cfc_dyn = scenario.get("physics.sensor_dynamics.cfc")
-        if cfc_dyn is not None:
-            cfc = cfc_dyn
+    cfc, dyn = dynamics_from_scenario(scenario)
     sensors = sensors_for_body(
         mounts, body, cfc=None if cfc is None else float(cfc),
         accel_full_scale=float(scenario.get("instrumentation.accel_full_scale_g")) * G0,
