@@ -46,7 +46,8 @@ import exudyn.itemInterface as eii
 import numpy as np
 from exudyn.utilities import RigidBodyInertia
 
-from .exudyn_model import TIME_MATCH_RTOL, BodyState, _RigidBodyReadout, _vec3
+from .exudyn_model import (TIME_MATCH_RTOL, BodyState, _restart_explicit, _RigidBodyReadout,
+                           _vec3)
 from .spec import RigidBodySpec
 
 #: penalty natural frequency times the integration step [-]: RK44 is stable up to 2.8 and
@@ -458,27 +459,17 @@ class ExudynCrushableBody(_RigidBodyReadout):
                                  f"differs from this element's {getattr(self, name)!r}")
         self.reset(d["reference_position"], d["reference_rotation"], (0.0, 0.0, 0.0),
                    (0.0, 0.0, 0.0), float(d["time"]))
-        sd = self._mbs.systemData
-        q = np.asarray(d["ode2"], dtype=np.float64)
-        q_t = np.asarray(d["ode2_t"], dtype=np.float64)
-        n = len(sd.GetODE2Coordinates())
-        if q.shape != (n,) or q_t.shape != (n,):
-            raise ValueError(f"ExudynCrushableBody.load_state_dict: ode2 shape {q.shape} / "
-                             f"ode2_t shape {q_t.shape}: must be ({n},)")
-        self._solver.FinalizeSolver(self._mbs, self._ss)
-        self._solver = None
-        sd.SetODE2Coordinates(q.tolist(), configuration=exu.ConfigurationType.Initial)
-        sd.SetODE2Coordinates_t(q_t.tolist(), configuration=exu.ConfigurationType.Initial)
-        for name in self._SCALARS:
-            setattr(self, name, d[name])
-        self.s_p = float(d["s_p"])
-        self.bottomed = bool(d["bottomed"])
-        self.n_advances = int(d["n_advances"])
-        self._time = float(d["time"])
-        self._exu_time = float(d["_exu_time"])
-        self._ss.timeIntegration.startTime = self._exu_time
-        self._solver = exu.MainSolverExplicit()
-        self._solver.InitializeSolver(self._mbs, self._ss)
+
+        def element_state():  # read by the connector's user function
+            for name in self._SCALARS:
+                setattr(self, name, d[name])
+            self.s_p = float(d["s_p"])
+            self.bottomed = bool(d["bottomed"])
+            self.n_advances = int(d["n_advances"])
+            self._time = float(d["time"])
+
+        _restart_explicit(self, d["ode2"], d["ode2_t"], d["_exu_time"], "ExudynCrushableBody",
+                          element_state)
         self._force = _vec3(d["force"], "force")
         self._torque = _vec3(d["torque"], "torque")
         self._nose_force = _vec3(d["nose_force"], "nose_force")

@@ -52,6 +52,39 @@ def _vec3(x, name):
     return a
 
 
+def _restart_explicit(body, ode2, ode2_t, exu_time: float, owner: str,
+                      before_start=None) -> None:
+    """Restart ``body``'s explicit Exudyn solver (``body._mbs``, ``body._ss``,
+    ``body._solver``) from saved ODE2 coordinates and velocities at Exudyn time ``exu_time``.
+
+    The explicit solver takes its state and clock from the initial configuration and
+    ``timeIntegration.startTime`` when it is initialised (setting the current configuration of
+    an initialised solver is not seen by its first step): both are set, then a fresh solver is
+    initialised. ``before_start()`` runs just before that (state its user functions read).
+
+    Raises
+    ------
+    ValueError naming ``owner`` when the vectors do not have the system's ODE2 size.
+    """
+    sd = body._mbs.systemData
+    q = np.asarray(ode2, dtype=np.float64)
+    q_t = np.asarray(ode2_t, dtype=np.float64)
+    n = len(sd.GetODE2Coordinates())
+    if q.shape != (n,) or q_t.shape != (n,):
+        raise ValueError(f"{owner}.load_state_dict: ode2 shape {q.shape} / ode2_t shape "
+                         f"{q_t.shape}: must be ({n},)")
+    body._solver.FinalizeSolver(body._mbs, body._ss)
+    body._solver = None
+    sd.SetODE2Coordinates(q.tolist(), configuration=exu.ConfigurationType.Initial)
+    sd.SetODE2Coordinates_t(q_t.tolist(), configuration=exu.ConfigurationType.Initial)
+    if before_start is not None:
+        before_start()
+    body._exu_time = float(exu_time)
+    body._ss.timeIntegration.startTime = body._exu_time
+    body._solver = exu.MainSolverExplicit()
+    body._solver.InitializeSolver(body._mbs, body._ss)
+
+
 class _RigidBodyReadout:
     """The read-out of one Exudyn rigid-body node shared by :class:`ExudynRigidBody` and the
     rear body of ``bodies.crush.ExudynCrushableBody``. Needs ``_mbs``, ``_node``, ``spec``,
@@ -337,25 +370,7 @@ class ExudynRigidBody(_RigidBodyReadout):
             return
         self.reset(d["reference_position"], d["reference_rotation"], (0.0, 0.0, 0.0),
                    (0.0, 0.0, 0.0), float(d["time"]))
-        sd = self._mbs.systemData
-        q = np.asarray(d["ode2"], dtype=np.float64)
-        q_t = np.asarray(d["ode2_t"], dtype=np.float64)
-        n = len(sd.GetODE2Coordinates())
-        if q.shape != (n,) or q_t.shape != (n,):
-            raise ValueError(f"ExudynRigidBody.load_state_dict: ode2 shape {q.shape} / ode2_t "
-                             f"shape {q_t.shape}: must be ({n},)")
-        # the explicit solver takes its state and clock from the initial configuration and
-        # ``timeIntegration.startTime`` when it is initialised (setting the current
-        # configuration of an initialised solver is not seen by its first step): set both,
-        # then initialise a fresh solver
-        self._solver.FinalizeSolver(self._mbs, self._ss)
-        self._solver = None
-        sd.SetODE2Coordinates(q.tolist(), configuration=exu.ConfigurationType.Initial)
-        sd.SetODE2Coordinates_t(q_t.tolist(), configuration=exu.ConfigurationType.Initial)
-        self._exu_time = float(d["exu_time"])
-        self._ss.timeIntegration.startTime = self._exu_time
-        self._solver = exu.MainSolverExplicit()
-        self._solver.InitializeSolver(self._mbs, self._ss)
+        _restart_explicit(self, d["ode2"], d["ode2_t"], d["exu_time"], "ExudynRigidBody")
         self.n_advances = int(d.get("n_advances", 0))
         self.apply(d["force"], d["torque"])
 
