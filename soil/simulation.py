@@ -63,6 +63,13 @@ def _material_table(materials: Sequence[Material]) -> np.ndarray:
     return tab
 
 
+def _pair_view(buf: str, dtype):
+    """Live view ``self.<buf>[:self._m]`` of a pair buffer (the first ``_m`` rows: the pairs of
+    the half list); assigning stores a contiguous ``dtype`` copy as the buffer."""
+    return property(lambda self: getattr(self, buf)[:self._m],
+                    lambda self, a: setattr(self, buf, np.ascontiguousarray(a, dtype)))
+
+
 class Simulation:
     """Discrete-element soil of spheres with rigid boundary bodies.
 
@@ -315,37 +322,10 @@ class Simulation:
         self._nbr_buf = np.ascontiguousarray(a, np.int32)
         self._m = self._nbr_buf.shape[0]
 
-    @property
-    def _hf(self):
-        return self._hf_buf[:self._m]
-
-    @_hf.setter
-    def _hf(self, a):
-        self._hf_buf = np.ascontiguousarray(a, np.float64)
-
-    @property
-    def _hi(self):
-        return self._hi_buf[:self._m]
-
-    @_hi.setter
-    def _hi(self, a):
-        self._hi_buf = np.ascontiguousarray(a, np.int32)
-
-    @property
-    def _tq(self):
-        return self._tq_buf[:self._m]
-
-    @_tq.setter
-    def _tq(self, a):
-        self._tq_buf = np.ascontiguousarray(a, np.float64)
-
-    @property
-    def _t_pair(self):
-        return self._tp_buf[:self._m]
-
-    @_t_pair.setter
-    def _t_pair(self, a):
-        self._tp_buf = np.ascontiguousarray(a, np.int32)
+    _hf = _pair_view("_hf_buf", np.float64)
+    _hi = _pair_view("_hi_buf", np.int32)
+    _tq = _pair_view("_tq_buf", np.float64)
+    _t_pair = _pair_view("_tp_buf", np.int32)
 
     def _update_elements(self):
         """World-frame element geometry and body kinematic arrays from the body poses."""
