@@ -33,16 +33,32 @@ from validation.diagnosis_yade.cases import (YADE_EFFECT_DRAWS, yade_available, 
 TOP_K = 2
 
 
-def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K) -> dict:
-    """Make (or load) one Yade case and diagnose it; returns the table row."""
+#: filter classes of the filter-class cases (drawn per seed; the baseline is filtered at CFC 60)
+FILTER_CLASSES = (180.0, 600.0, 1000.0)
+
+
+def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
+                  filter_class: bool = False) -> dict:
+    """Make (or load) one Yade case and diagnose it; returns the table row.
+
+    ``filter_class``: the null physics of ``seed`` acquired at a class drawn from
+    ``FILTER_CLASSES`` and not declared (truth: ``sensor_dynamics``, filter-class form)."""
+    import numpy as np
+
     from crashdem.diagnosis import screen_then_confirm
-    from crashdem.diagnosis.generator_dem import DemFullSimulator, impact_speed
+    from crashdem.diagnosis.generator_dem import (DemFullSimulator, dem_baseline_raw,
+                                                  impact_speed)
 
     t0 = time.perf_counter()
-    case = yade_case(seed, effect)
+    if filter_class:
+        cfc = float(FILTER_CLASSES[int(np.random.default_rng(20_000 + seed).integers(3))])
+        case = yade_case(seed, None, cfc=cfc, declare_cfc=False)
+        effect = "sensor_dynamics"
+    else:
+        case = yade_case(seed, effect)
     t1 = time.perf_counter()
     rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
-                              impact_speed=impact_speed())
+                              impact_speed=impact_speed(), baseline_raw=dem_baseline_raw())
     t2 = time.perf_counter()
     top = rep.hypotheses[0]
     claimed = rep.missing_physics
@@ -50,10 +66,12 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K) -> dict:
     for h in rep.hypotheses:
         if h["name"] == (claimed or top["name"]):
             fitted = h["parameters"]
-    errors = {k: (fitted[k] - v) / abs(v) for k, v in case.values.items()
+    values = {"filter_class": cfc} if filter_class else case.values
+    errors = {k: (fitted[k] - v) / abs(v) for k, v in values.items()
               if k in fitted and v != 0}
     after = rep.fit.get("after_full", {}).get("overall", rep.fit["after"]["overall"])
-    return {"truth": effect, "seed": seed, "drawn": case.drawn, "claimed": claimed,
+    return {"truth": effect, "seed": seed,
+            "drawn": {"filter_class": cfc} if filter_class else case.drawn, "claimed": claimed,
             "top_ranked": top["name"], "top_delta_bic": top["delta_bic_vs_recalibration"],
             "fitted": fitted, "parameter_errors": errors,
             "score_before": rep.fit["before"]["overall"], "score_after": after,
@@ -69,6 +87,9 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", nargs="*", type=int, default=[11, 12])
     ap.add_argument("--nulls", nargs="*", type=int, default=[21, 22],
                     help="seeds of null cases (no concealed effect)")
+    ap.add_argument("--filter-seeds", nargs="*", type=int, default=[21, 22],
+                    help="null Yade runs re-acquired at another, undeclared filter class "
+                         "(truth: sensor_dynamics, filter-class form)")
     ap.add_argument("--top-k", type=int, default=TOP_K)
     args = ap.parse_args(argv)
     if not yade_available():
@@ -87,6 +108,12 @@ def main(argv=None) -> int:
                   f"errors={ {k: f'{v:+.0%}' for k, v in r['parameter_errors'].items()} } "
                   f"full runs={r['full_simulations']} ({r['case_wall_s']:.0f} s + "
                   f"{r['diagnosis_wall_s']:.0f} s)", flush=True)
+    for s in args.filter_seeds:
+        rows.append(diagnose_case(None, s, args.top_k, filter_class=True))
+        r = rows[-1]
+        print(f"{'filter class':20s} seed {s}: CFC {r['drawn']['filter_class']:g} claimed="
+              f"{r['claimed']} top={r['top_ranked']} fitted={r['fitted']} score "
+              f"{r['score_before']:.3f} -> {r['score_after']:.3f}", flush=True)
     for s in args.nulls:
         rows.append(diagnose_case(None, s, args.top_k))
         r = rows[-1]

@@ -38,6 +38,7 @@ from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align, e
                                          locate_mismatch, onset_time)
 from crashdem.diagnosis.rom import ACCEL, PENETRATION, VELOCITY, RomParams, RomSettings, RomSimulator
 from crashdem.diagnosis import _dsp
+from crashdem.diagnosis.filter_check import CLASSES as FILTER_CLASSES, filter_class_check
 from crashdem.diagnosis.sensor_check import accel_velocity_check
 from crashdem.signal import Signal
 
@@ -117,7 +118,9 @@ def _evidence(h: Hypothesis, res: FitResult, before: list[MismatchWindow],
     fixed = [w for w in before if not any(
         a.channel == w.channel and a.t_end_s >= w.t_start_s and a.t_start_s <= w.t_end_s
         for a in after)]
-    own = ", ".join(f"{p.name} = {res.parameters[p.name]:.3g} {p.unit}" for p in h.parameters)
+    own = ", ".join(f"{p.name} = {res.parameters[p.name]:.3g} {p.unit}" for p in h.parameters) \
+        if res.variant != FILTER_CLASS_VARIANT else \
+        f"the baseline re-filtered at CFC {res.parameters['filter_class']:g}"
     if fixed:
         f = max(fixed, key=lambda w: w.max_residual_sigma)
         what = f.feature.replace("_", " ")
@@ -191,6 +194,102 @@ def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, 
              "mount_damping": float(check["mount_damping"]),
              "mount_form": float(check["form"] == "mount")}
     return _fit_fixed(problem, h, fixed, check["uncertainty"], recal, str(check["form"]))
+
+
+#: label of the ``sensor_dynamics`` form "the recording was filtered with another CFC class"
+FILTER_CLASS_VARIANT = "filter_class"
+
+
+def _filter_class_stage(rec: dict[str, Signal], base: dict[str, Signal],
+                        base_raw: Mapping[str, Signal] | None, channels: list[str],
+                        noise: Mapping[str, NoiseEstimate], accept_margin: float
+                        ) -> tuple[dict[str, Signal], dict[str, Signal], dict[str, Any]]:
+    """Filter class of each recorded channel (declared, or read from its pre-event noise
+    spectrum: ``filter_check``) against the baseline's; where they differ the baseline is
+    re-filtered at the recording's class (from its raw channel when given, else -- only to a
+    lower class -- from its filtered one), so that everything after compares like with like.
+
+    Returns the recording (``cfc`` set to the class used), the baseline to diagnose on, and
+    ``{"channels": {ch: check + class_used, source, baseline_class, refilter}, "mismatch",
+    "class", "delta_bic"}``."""
+    rec2, base2 = dict(rec), dict(base)
+    quiet = noise[channels[0]].window
+    per: dict[str, Any] = {}
+    mism, classes, evidence = False, [], 0.0
+    for ch in channels:
+        r = rec[ch]
+        chk = filter_class_check(r, quiet or noise[ch].window, declared=r.cfc,
+                                 accept_margin=accept_margin)
+        used, how = r.cfc, "declared by the recording"
+        if chk.get("applicable") and chk["decisive"]:
+            if r.cfc is None:
+                used, how = chk["measured"], "measured (the recording declares none)"
+            elif chk["contradicts_declared"]:
+                used, how = chk["measured"], (f"measured (the recording declares CFC "
+                                              f"{r.cfc:g}, its noise spectrum says otherwise)")
+        if used != r.cfc:
+            rec2[ch] = replace(r, cfc=used)
+        b = base[ch].cfc
+        entry = {**chk, "class_used": used, "source": how, "baseline_class": b,
+                 "refilter": None}
+        if used is not None and b is not None and not math.isclose(float(used), float(b)):
+            raw = (base_raw or {}).get(ch)
+            bs = base[ch]
+            if raw is not None:
+                rs = raw.to_si()
+                data, how_f, t = _dsp.cfc(rs.data, rs.fs, float(used)), "from the raw channel", rs.t
+            elif float(used) < float(b):
+                data, how_f, t = _dsp.cfc(bs.data, bs.fs, float(used)), \
+                    "from the filtered channel (lower class)", bs.t
+            else:
+                data, how_f, t = None, None, None
+            if data is not None:
+                base2[ch] = Signal(bs.name, t.copy(), data, bs.unit, float(used),
+                                   {**bs.meta, "refiltered": f"CFC {b:g} -> {used:g} {how_f}"})
+            entry["refilter"] = how_f or (f"not possible: a CFC {b:g} channel cannot be turned "
+                                          f"into CFC {used:g} without its raw data")
+            mism = True
+            classes.append(float(used))
+            if chk.get("applicable") and chk.get("measured") == used:
+                evidence += chk["bic"].get(f"{float(b):g}", 0.0) - chk["bic"][f"{float(used):g}"]
+        per[ch] = entry
+    return rec2, base2, {"channels": per, "mismatch": mism,
+                         "class": classes[0] if classes else None,
+                         "delta_bic": evidence if evidence > 0 else None}
+
+
+#: cosine similarity (recording vs baseline over the event) below which a channel is read as
+#: recorded with the opposite sign convention (z down, deceleration negative, ...) -- flipped
+#: only when the flipped channel then agrees as well (cosine above minus this)
+SIGN_FLIP_COSINE = -0.5
+
+
+def _sign_convention(rec: dict[str, Signal], base: dict[str, Signal], channels: list[str],
+                     shift: float, t_on: float) -> tuple[dict[str, Signal], dict[str, Any]]:
+    """Channels recorded with the opposite sign convention, turned to the simulation's.
+
+    Over the event (from the onset ``t_on`` to the end of the baseline), the cosine similarity
+    ``sum(r b) / sqrt(sum r^2 sum b^2)`` of the recording ``r`` and the aligned baseline ``b``
+    is close to +1 for the same convention (deceleration and velocity alike: not
+    mean-removed, so the free-fall velocity counts) and close to -1 for the opposite one; a
+    channel is flipped when it is below ``SIGN_FLIP_COSINE``. Returns the recording and
+    ``{ch: {"cosine", "flipped"}}``."""
+    out, info = dict(rec), {}
+    for ch in channels:
+        r, b = rec[ch], base[ch]
+        m = (r.t >= t_on) & (r.t <= float(b.t[-1]) + shift)
+        if m.sum() < 8:
+            continue
+        x = r.data[m]
+        y = np.interp(r.t[m], b.t + shift, b.data)
+        den = math.sqrt(float(np.dot(x, x)) * float(np.dot(y, y)))
+        cos = float(np.dot(x, y)) / den if den > 0.0 else 0.0
+        flip = cos < SIGN_FLIP_COSINE
+        info[ch] = {"cosine": cos, "flipped": bool(flip)}
+        if flip:
+            out[ch] = Signal(r.name, r.t, -r.data, r.unit, r.cfc,
+                             {**r.meta, "sign": "flipped to the simulation's convention"})
+    return out, info
 
 
 def measured_impact_speed(acc: Signal, vel: Signal, noise_vel: NoiseEstimate,
@@ -322,7 +421,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
              noise: Mapping[str, NoiseEstimate] | None = None,
              calibrate_to_baseline: bool = True, anchor_to_baseline: bool = True,
              accept_margin: float = ACCEPT_MARGIN, anchor_index: str = ANCHOR_INDEX,
-             impact_speed: float | None = None) -> Report:
+             impact_speed: float | None = None,
+             baseline_raw: Mapping[str, Signal] | None = None) -> Report:
     """Locate the mismatch, fit every hypothesis, decide the missing physics.
 
     Parameters
@@ -355,6 +455,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         the baseline's discrepancy of that depth, not of that time). ``"depth"`` needs a
         ``penetration`` channel from the screening model (the ROM has one), else falls back
         to time
+    baseline_raw : the baseline's unfiltered channels (same names), used to re-filter the
+        baseline when the recording was filtered with another CFC class (``filter_check``);
+        without them only a lower class can be matched
 
     Returns
     -------
@@ -390,10 +493,17 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     sigma_p = noise[primary].sigma
     shift0 = onset_time(rec[primary], sigma_p) - onset_time(base[primary], 0.0)
     t0 = onset_time(rec[primary], sigma_p) - PRE_ONSET
+    rec, signs = _sign_convention(rec, base, channels, shift0, t0)
     windows: list[MismatchWindow] = []
     for ch in channels:
         windows += locate_mismatch(rec[ch], base[ch], noise[ch], shift=shift0)
     base_aligned = {ch: align(rec[ch], base[ch], shift0) for ch in channels}
+    # the filter class of the recording against the baseline's: from here on both are compared
+    # at the recording's class (the "before" above is the baseline as the user has it)
+    rec, base, fclass = _filter_class_stage(
+        rec, base, _si(baseline_raw) if baseline_raw else None, channels, noise, accept_margin)
+    filter_found = bool(fclass["mismatch"]) and "sensor_dynamics" in (
+        list(hypotheses) if hypotheses is not None else list(catalogue.NAMES))
 
     rom_calls0 = 0
     if simulator is None:
@@ -507,6 +617,20 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     if sensor_found:
         # the evidence for the sensor is the model-free check's, not the soil-model fit's
         fits["sensor_dynamics"].bic = recal.bic - float(check["delta_bic"])
+    if filter_found:
+        # sensor_dynamics as "another filter class": the recalibration on the baseline
+        # re-filtered at the recording's class; its evidence is the noise spectrum's (none
+        # when the class is only declared by the file: a fact, not an inference)
+        fr = replace(recal, hypothesis="sensor_dynamics", variant=FILTER_CLASS_VARIANT,
+                     parameters=dict(recal.parameters), uncertainty=dict(recal.uncertainty),
+                     units=dict(recal.units))
+        fr.parameters["filter_class"] = float(fclass["class"])
+        fr.uncertainty["filter_class"] = 0.0
+        fr.units["filter_class"] = "Hz"
+        fr.form_penalty = math.log(len(FILTER_CLASSES))  # the class is chosen among these
+        fr.complexity_penalty = recal.complexity_penalty + fr.form_penalty
+        fr.bic = recal.bic + fr.form_penalty - float(fclass["delta_bic"] or 0.0)
+        fits["sensor_dynamics"] = fr
     ranked = rank(list(fits.values()))
 
     # decision
@@ -515,6 +639,21 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         decision = (f"baseline explains the recording within noise (residual {base_rms:.2f} sigma "
                     f"RMS <= {WITHIN_NOISE_RATIO})")
         missing, best_name, chosen = None, None, None
+    elif filter_found:
+        f = fclass["channels"][primary]
+        ev = (f"Delta BIC = {fclass['delta_bic']:.1f} from the pre-event noise spectrum"
+              if fclass["delta_bic"] else "declared by the recording")
+        decision = (f"sensor_dynamics (filter class): the recording is filtered at CFC "
+                    f"{fclass['class']:g} ({f['source']}; {ev}), the baseline at CFC "
+                    f"{f['baseline_class']:g}; the baseline is compared re-filtered "
+                    f"{f['refilter']}")
+        missing, best_name, chosen = "sensor_dynamics", "sensor_dynamics", fits["sensor_dynamics"]
+        other = next((r for r in ranked if r.hypothesis not in (RECALIBRATION.name,
+                                                                 "sensor_dynamics")), None)
+        if other is not None and (recal.bic - other.bic) > accept_margin and (
+                other.scores["overall"] - recal.scores["overall"]) >= MIN_SCORE_GAIN:
+            decision += (f"; at that class {other.hypothesis} also beats the recalibration "
+                         f"(Delta BIC = {recal.bic - other.bic:.1f})")
     elif sensor_found and best_phys is not None and best_phys.hypothesis == "sensor_dynamics":
         decision = (f"sensor_dynamics: the accelerometer disagrees with the measured velocity's "
                     f"derivative by {check['rms_sigma_ideal']:.1f} sigma RMS, explained by a "
@@ -567,6 +706,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         for ch in channels:
             after_r += locate_mismatch(rec[ch], r.aligned[ch], noise[ch], shift=0.0)
         own = [p.name for p in h.parameters]
+        if r.variant == FILTER_CLASS_VARIANT:
+            own = ["filter_class"]
         hyp_out.append({
             "name": r.hypothesis,
             "parameters": {k: r.parameters[k] for k in own} if own else {},
@@ -576,7 +717,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             "recalibration_uncertainty": {p.name: r.uncertainty[p.name]
                                           for p in RECALIBRATION.parameters},
             "variant": r.variant,
-            "scenario_overrides": h.scenario_overrides(r.parameters, r.variant),
+            "scenario_overrides": ({"instrumentation.cfc": r.parameters["filter_class"]}
+                                   if r.variant == FILTER_CLASS_VARIANT else
+                                   h.scenario_overrides(r.parameters, r.variant)),
             "effects": r.hypothesis.split("+") if r.hypothesis != RECALIBRATION.name else [],
             "score_before": base_scores["overall"],
             "score_after": r.scores["overall"],
@@ -612,6 +755,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "score_window_s": list(problem.score_window),
         "sensor_check": check,
         "impact_speed_check": speed,
+        "filter_class": fclass,
+        "sign_convention": signs,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
     # filtered noise, or far above it, is model-form error the catalogue does not cover
@@ -625,6 +770,10 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         fit_out["warning"] = (f"residual after the fit is {rms_f:.1f} sigma RMS (> {MODEL_ERROR_RMS:g}): "
                               "model-form error the catalogue does not explain; treat the result as "
                               "a screening result and confirm with the full simulation")
+    flipped = [ch for ch, v in signs.items() if v["flipped"]]
+    if flipped:
+        decision += (f" (channels {flipped} were recorded with the opposite sign convention and "
+                     "are compared sign-flipped)")
     refitted = dict(chosen.aligned) if chosen is not None else {}
     sims = {"screening_model": type(simulator).__name__,
             "screening_runs": rom_calls0 + sim.calls,
@@ -691,6 +840,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         # DEM: every full run with the mapped factors scored below the baseline), while the
         # effect parameters (depths, speeds, frequencies) have the same meaning in both
         requests.append((h["name"], _confirmation_overrides(h)))
+    fclass = rep.fit.get("filter_class") or {}
+    if fclass.get("mismatch") and fclass.get("class") is not None:
+        # every full run is filtered at the recording's class (instrumentation.cfc), as the
+        # screening compared it
+        requests = [(n, {**ov, "instrumentation.cfc": float(fclass["class"])})
+                    for n, ov in requests]
     t_full = time.perf_counter()
     outs: list[Any] = []
     if hasattr(full_simulator, "map"):
@@ -747,7 +902,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     # a sensor found by the model-free accelerometer/velocity check needs no soil model: its
     # full run only adds granular noise to the same conclusion
     checked = (rep.missing_physics == "sensor_dynamics"
-               and bool(rep.fit.get("sensor_check", {}).get("detected")))
+               and (bool(rep.fit.get("sensor_check", {}).get("detected"))
+                    or bool(fclass.get("mismatch"))))
     if screened is not None and (checked or screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN):
         # the screening's claim stands unless its full run is decisively worse than the
         # reference or another candidate's full run is decisively better than it
@@ -779,6 +935,8 @@ def _confirmation_overrides(h: dict[str, Any]) -> dict[str, Any]:
     """Scenario overrides of a candidate's full run: its screened parameters, except where
     the screening left the effect switched off (a parameter at its ``off`` value, i.e. the
     screening model could not see the effect): there the catalogue's nominal value is used."""
+    if h.get("variant") == FILTER_CLASS_VARIANT:
+        return {"instrumentation.cfc": float(h["parameters"]["filter_class"])}
     hyp = catalogue.get(h["name"])
     vals = dict(h["parameters"])
     for p in hyp.parameters:

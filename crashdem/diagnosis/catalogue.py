@@ -267,7 +267,9 @@ CATALOGUE: tuple[Hypothesis, ...] = (
         "sensor_dynamics",
         ("The measured acceleration is seen through the accelerometer mount: a base-excitation "
          "resonance fn with damping ratio zeta (Thomson & Dahl, section 3.5), ringing and "
-         "overshoot in the recorded channel."),
+         "overshoot in the recorded channel; or the channel was filtered with another CFC "
+         "class than the simulation (measured from the pre-event noise spectrum, "
+         "``filter_check``; fixed by ``instrumentation.cfc``)."),
         (ParameterSpec("mount_frequency", "Hz", 20.0, 1000.0, 120.0, "log",
                        "mount natural frequency", "physics.sensor_dynamics.natural_frequency",
                        off=1000.0),

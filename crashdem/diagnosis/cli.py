@@ -184,11 +184,13 @@ def diagnose_command(args: argparse.Namespace) -> int:
             full = _LocalFallback(full_simulator_from_args(args, scen, cmap), local,  # type: ignore[assignment]
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
-                                  rom_base=base_params, calibrate_to_baseline=source != "rom")
+                                  rom_base=base_params, calibrate_to_baseline=source != "rom",
+                                  baseline_raw=_baseline_raw(source, cmap))
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
     else:
-        rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom")
+        rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
+                       baseline_raw=_baseline_raw(source, cmap))
     rep.simulations["baseline_source"] = source
     paths = write_report(rep, args.out)
     print(paths["json"])
@@ -314,6 +316,30 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSe
                          f"{sorted(cmap)} (nor {sorted(SIM_CHANNELS.values())}); map them with "
                          "--channel NAME:accel_z")
     return got, f"full run {path}"
+
+
+def _baseline_raw(source: str, cmap: dict[str, str]) -> dict[str, Signal] | None:
+    """The baseline run's unfiltered channels (model channel names), read from its result file,
+    so that the diagnosis can re-filter the baseline at a recording's other CFC class; None
+    for a ROM baseline or a file without them."""
+    if not (source.startswith("full run ") or source.startswith("full result ")):
+        return None
+    try:
+        from crashdem.results import open_result
+
+        res = open_result(Path(source.split(" ", 2)[2]))
+    except (ImportError, OSError, ValueError, KeyError):
+        return None
+    try:
+        out: dict[str, Signal] = {}
+        for name, rom_name in cmap.items():
+            for n in (name, SIM_CHANNELS.get(rom_name)):
+                if n is not None and n in res:
+                    out[rom_name] = res.channel(n, filtered=False)
+                    break
+        return out or None
+    finally:
+        res.close()
 
 
 def _apply_scales(scen, scales: dict[str, float]) -> dict[str, Any]:

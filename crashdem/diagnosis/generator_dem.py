@@ -53,7 +53,7 @@ from crashdem.signal import Signal
 
 __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
-           "cache_dir"]
+           "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS"]
 
 #: the drop-test scenario of the truth and baseline
 SCENARIO = Path(__file__).resolve().parents[2] / "validation" / "scenarios" / "drop_s2_h13p70.toml"
@@ -307,6 +307,42 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
     return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset,
                             {"particles": info.get("particles"), "dt": info.get("dt"),
                              "wall_s": info.get("wall_s")}, drawn, dem_baseline(cache))
+
+
+#: filter classes a "different filter class" recording is drawn from [Hz] (the baseline: CFC 60)
+FILTER_CLASS_DRAWS = (180.0, 600.0, 1000.0)
+
+
+def dem_filter_class_case(seed: int, *, declared: bool = False, cache: Path | None = None
+                          ) -> DemConcealedCase:
+    """A DEM-truth recording of the baseline physics whose lab filtered it with another CFC
+    class (``sensor_dynamics`` in its filter-class form): the truth numerics of
+    :func:`dem_concealed_case`, the class drawn from ``FILTER_CLASS_DRAWS``; the recording
+    declares its class only with ``declared`` (a CSV without a header says nothing).
+    ``values``: ``{"filter_class": class}``."""
+    rng = np.random.default_rng(10_000 + int(seed))
+    cfc = float(FILTER_CLASS_DRAWS[int(rng.integers(len(FILTER_CLASS_DRAWS)))])
+    num = truth_numerics(rng, seed)
+    raw, info = run_dem(num, filtered=False, cache=cache)
+    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
+    acc, vel = raw["accel_z"], raw["velocity_z"]
+    rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
+                          float(-vel.data[0]), rng, trigger_offset=offset, cfc=cfc,
+                          source=f"crashdem DEM truth (seed {num['scenario.seed']}, radius "
+                                 f"{num['soil.radius']:g} m, safety {num['solver.safety']:g}), "
+                                 f"CFC {cfc:g}")
+    if not declared:
+        rec = {k: Signal(s.name, s.t, s.data, s.unit, None, s.meta) for k, s in rec.items()}
+    return DemConcealedCase("sensor_dynamics", {"filter_class": cfc}, {}, seed, rec, num, offset,
+                            {"particles": info.get("particles"), "dt": info.get("dt"),
+                             "wall_s": info.get("wall_s")}, {"filter_class": cfc},
+                            dem_baseline(cache))
+
+
+def dem_baseline_raw(cache: Path | None = None) -> dict[str, Signal]:
+    """The baseline simulation's unfiltered channels (to re-filter it at another class)."""
+    sigs, _ = run_dem(dict(BASELINE_NUMERICS), filtered=False, cache=cache)
+    return sigs
 
 
 class DemFullSimulator:

@@ -5,7 +5,7 @@ Oracle: the concealed truth of the Yade case (its own deposition, contact laws, 
 effect implementation). Two cases keep the cost down (a cold case costs one Yade deposition and
 impact, ~1-4 min; cached afterwards): a null case, on which no missing physics may be claimed,
 and a resonant accelerometer, which the model-free accelerometer/velocity check must name with
-its frequency within 15 %. The full set (6 effects x 2 seeds + 2 nulls) is
+its frequency within 15 %, and the null run re-acquired at another filter class. The full set (6 effects x 2 seeds + 2 nulls) is
 ``python validation/diagnose_yade.py`` (docs/diagnosis.md "Validation on Yade recordings").
 """
 from __future__ import annotations
@@ -38,3 +38,14 @@ def test_yade_sensor_resonance_is_named_with_its_frequency():
     assert row["claimed"] == "sensor_dynamics", row["decision"]
     assert row["fitted"]["mount_frequency"] == pytest.approx(
         row["drawn"]["natural_frequency"], rel=0.15)
+
+
+def test_yade_filter_class_is_named():
+    """The Yade null run of seed 21 filtered by the lab at another class than the baseline's
+    CFC 60 (drawn, not declared): named ``sensor_dynamics`` with the class (the same Yade run
+    as the null case above, so no extra Yade cost)."""
+    from validation.diagnose_yade import diagnose_case
+
+    row = diagnose_case(None, 21, filter_class=True)
+    assert row["claimed"] == "sensor_dynamics", row["decision"]
+    assert row["fitted"] == {"filter_class": row["drawn"]["filter_class"]}

@@ -96,10 +96,9 @@ def _scenario():
 
 
 def _fingerprint() -> str:
-    h = hashlib.sha256()
-    for f in (SCRIPT, Path(__file__)):
-        h.update(f.read_bytes())
-    return h.hexdigest()[:12]
+    """Version of the Yade runs: the Yade script (every input of a run is in its ``cfg``,
+    which is part of the cache key; the acquisition in this module does not change a run)."""
+    return hashlib.sha256(SCRIPT.read_bytes()).hexdigest()[:12]
 
 
 def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, Any]]:
@@ -126,9 +125,14 @@ def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, An
     return np.load(str(out) + ".npy"), json.loads(Path(str(out) + ".json").read_text())
 
 
-def yade_case(seed: int, effect: str | None, *, cache: Path | None = None) -> YadeCase:
+def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
+              cfc: float = 60.0, declare_cfc: bool = True) -> YadeCase:
     """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
-    drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline."""
+    drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline.
+
+    ``cfc``: the lab's filter class (the baseline's is 60: another class is the
+    ``sensor_dynamics`` filter-class form); ``declare_cfc=False`` leaves it out of the channels
+    (a CSV without a header)."""
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
@@ -179,10 +183,12 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None) -> Ya
         acc = MountDynamics(drawn["natural_frequency"], drawn["damping_ratio"],
                             drawn["model"]).apply(Signal("a", t_raw, acc, "m/s^2")).data
     rec = acquire_samples(t_raw, {"accel_z": (acc, "m/s^2"), "velocity_z": (vz[sel], "m/s")},
-                          float(-vz[sel][0]), rng, trigger_offset=offset,
+                          float(-vz[sel][0]), rng, trigger_offset=offset, cfc=cfc,
                           t_end=float(scen["solver.t_end"]),
                           source=f"Yade 2023.02a truth (seed {cfg['seed']}, radius {radius:g} m, "
                                  f"dt {info['dt']:.3g} s)")
+    if not declare_cfc:
+        rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
     values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,

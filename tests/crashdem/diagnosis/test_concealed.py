@@ -189,16 +189,39 @@ def test_impact_speed_measured_from_the_free_fall(offset):
         assert h["parameters"]["speed_offset"] == pytest.approx(offset, rel=0.02)
 
 
-def test_impact_speed_of_another_convention_is_not_used():
-    """A velocity recorded down-positive gives a 'recorded impact speed' of the wrong sign: it
-    is reported with the reason and not used as a speed offset (no crash, no claim from it)."""
+def test_impact_speed_of_another_unit_is_not_used():
+    """A velocity in another unit than it says (km/h labelled m/s) gives a 'recorded impact
+    speed' far from the baseline's: it is reported with the reason and not used as a speed
+    offset (no crash, no claim from it)."""
     from crashdem.diagnosis.generator import acquire
     from crashdem.signal import Signal
 
     rec = acquire(RomParams(), np.random.default_rng(9))
     v = rec["velocity_z"]
-    rec["velocity_z"] = Signal("velocity_z", v.t, -v.data, v.unit, v.cfc)
+    rec["velocity_z"] = Signal("velocity_z", v.t, 3.6 * v.data, v.unit, v.cfc)
     rep = diagnose(simulate(RomParams()), {"accel_z": rec["accel_z"], "velocity_z": rec["velocity_z"]},
                    impact_speed=RomParams().v0, hypotheses=["initial_conditions"])
     chk = rep.fit["impact_speed_check"]
     assert chk["used"] is False and "50 %" in chk["reason"]
+
+
+@pytest.mark.parametrize("flip", [("accel_z",), ("velocity_z",), ("accel_z", "velocity_z")])
+def test_opposite_sign_convention_is_flipped(flip):
+    """Channels recorded with the opposite sign convention (z down: deceleration negative,
+    velocity down-positive) are recognised against the baseline, flipped and diagnosed as if
+    recorded in the simulation's convention: the speed offset of the truth is named within 2 %
+    as without the flip; unflipped channels are reported as such."""
+    from crashdem.diagnosis.generator import acquire
+    from crashdem.signal import Signal
+
+    rec = acquire(RomParams(speed_offset=-2.5), np.random.default_rng(10))
+    for ch in flip:
+        s = rec[ch]
+        rec[ch] = Signal(ch, s.t, -s.data, s.unit, s.cfc)
+    rep = diagnose(simulate(RomParams()), rec, impact_speed=RomParams().v0)
+    signs = rep.fit["sign_convention"]
+    assert {ch for ch, v in signs.items() if v["flipped"]} == set(flip)
+    assert all(abs(v["cosine"]) > 0.8 for v in signs.values())
+    assert rep.missing_physics == "initial_conditions"
+    h = next(x for x in rep.hypotheses if x["name"] == "initial_conditions")
+    assert h["parameters"]["speed_offset"] == pytest.approx(-2.5, rel=0.02)

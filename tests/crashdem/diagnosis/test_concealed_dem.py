@@ -213,3 +213,59 @@ def test_cli_runs_the_baseline_dem_itself(tmp_path, seed, effect):
     assert all(r.get("score") is not None for r in rep["fit"]["confirmation"])
     assert rep["fit"]["sensor_check"]["applicable"] and not rep["fit"]["sensor_check"]["detected"]
     assert rep["missing_physics"] == effect
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_dem_truth_filter_class(seed):
+    """``sensor_dynamics`` as a different filter class on DEM truth: the baseline physics with
+    the truth numerics, acquired and filtered by the lab at a class drawn from 180 / 600 /
+    1000 Hz (the baseline run: CFC 60), the class NOT declared by the recording. The class is
+    read from the pre-event noise, the baseline re-filtered from its raw channels, the claim
+    kept by the full-DEM confirmation (its runs filtered at the recording's class)."""
+    from crashdem.diagnosis.generator_dem import dem_baseline_raw, dem_filter_class_case
+
+    c = dem_filter_class_case(seed)
+    assert all(s.cfc is None for s in c.recording.values())
+    r = screen_then_confirm(c.baseline, c.recording, DemFullSimulator(), top_k=TOP_K,
+                            impact_speed=impact_speed(), baseline_raw=dem_baseline_raw())
+    print(f"\nDEM truth filter class {c.values['filter_class']:g} (seed {seed}): {r.decision}")
+    assert r.missing_physics == "sensor_dynamics", r.decision
+    h = next(h for h in r.hypotheses if h["name"] == "sensor_dynamics")
+    assert h["variant"] == "filter_class"
+    assert h["parameters"]["filter_class"] == c.values["filter_class"]
+    assert all(row["overrides"].get("instrumentation.cfc") == c.values["filter_class"]
+               for row in r.fit["confirmation"])
+    assert r.fit["residual_rms_sigma_after"] < r.fit["residual_rms_sigma_before"]
+
+
+def test_cli_filter_class_from_csv(tmp_path):
+    """``crashdem diagnose`` on a CSV recording filtered at another class than the scenario's
+    CFC 60 and not saying so: the class is measured, the baseline run's raw channels are read
+    back from its HDF5 result and re-filtered, the confirmation runs use the class."""
+    import json
+
+    from crashdem import cli
+    from crashdem.diagnosis import generator_dem as gd
+    from crashdem.recordings import write_recording
+
+    case = gd.dem_filter_class_case(12)
+    assert all(s.cfc is None for s in case.recording.values())  # the CSV declares no class
+    rec_path = write_recording(tmp_path / "rec.csv", case.recording)
+    out = tmp_path / "out"
+    (out / "baseline").mkdir(parents=True)
+    pk = gd.cache_dir() / "packings"
+    pk.mkdir(parents=True, exist_ok=True)
+    (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
+    argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
+            "--out", str(out), "--workers", "0"]
+    for k, v in {**gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS,
+                 "scenario.name": "cli_filter_class"}.items():
+        argv += ["--set", f"{k}={str(v).lower() if isinstance(v, bool) else v}"]
+    assert cli.main(argv) == 0
+    rep = json.loads((out / "report.json").read_text())
+    assert rep["missing_physics"] == "sensor_dynamics", rep["decision"]
+    fc = rep["fit"]["filter_class"]
+    assert fc["class"] == case.values["filter_class"]
+    assert fc["channels"]["accel_z"]["refilter"] == "from the raw channel"
+    h = next(h for h in rep["hypotheses"] if h["name"] == "sensor_dynamics")
+    assert h["scenario_overrides"] == {"instrumentation.cfc": case.values["filter_class"]}

@@ -1,0 +1,103 @@
+"""Filter class read from a recording's pre-event noise (``filter_check``) and the diagnosis of a
+recording filtered with another CFC class than the simulation (``sensor_dynamics``, form
+``filter_class``).
+
+Oracle: the class the ROM truth generator filtered the recording with (integrating 12.5 kHz
+acquisition, white noise, SAE J211 at the drawn class); the check only sees the samples.
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from crashdem.diagnosis import diagnose
+from crashdem.diagnosis.filter_check import filter_class_check
+from crashdem.diagnosis.generator import acquire
+from crashdem.diagnosis.mismatch import estimate_noise
+from crashdem.diagnosis.rom import RomParams, RomSettings, simulate
+
+
+def _quiet(rec):
+    return estimate_noise(rec["accel_z"]).window
+
+
+@pytest.mark.parametrize("cfc", [60.0, 180.0, 600.0, 1000.0])
+@pytest.mark.parametrize("seed", [1, 2])
+def test_class_measured_from_the_noise_spectrum(cfc, seed):
+    rec = acquire(RomParams(), np.random.default_rng(seed), cfc=cfc)
+    for ch in ("accel_z", "velocity_z"):
+        r = filter_class_check(rec[ch], _quiet(rec), declared=cfc)
+        assert r["applicable"], r
+        assert r["measured"] == cfc
+        assert not r["contradicts_declared"]
+        # the neighbouring classes are far apart in likelihood
+        assert r["delta_bic_next"] > 5.0
+
+
+@pytest.mark.parametrize("cfc", [180.0, 600.0, 1000.0])
+def test_declared_class_contradicted(cfc):
+    """A file that says CFC 60 about a CFC ``cfc`` channel is contradicted decisively."""
+    rec = acquire(RomParams(), np.random.default_rng(7), cfc=cfc)
+    r = filter_class_check(rec["accel_z"], _quiet(rec), declared=60.0)
+    assert r["contradicts_declared"] and r["decisive"]
+    assert r["delta_bic_declared"] > 100.0
+
+
+def test_not_applicable_without_quiet_noise():
+    rec = acquire(RomParams(), np.random.default_rng(1), cfc=60.0)
+    a = rec["accel_z"]
+    assert not filter_class_check(a, None)["applicable"]
+    short = (float(a.t[0]), float(a.t[0]) + 50 / a.fs)
+    r = filter_class_check(a, short)
+    assert not r["applicable"] and "samples" in r["reason"]
+    clean = replace(a, data=np.zeros_like(a.data))
+    r = filter_class_check(clean, _quiet(rec))
+    assert not r["applicable"] and "noise" in r["reason"]
+
+
+@pytest.mark.parametrize("declared", [True, False])
+def test_diagnosis_names_the_filter_class(declared):
+    """Same physics, the recording filtered at CFC 180 (declared by the file or not), the
+    simulation at CFC 60: ``sensor_dynamics`` in its filter-class form, the baseline compared
+    re-filtered from its raw channels, the scenario fix ``instrumentation.cfc = 180`` and a
+    better fit after."""
+    rec = acquire(RomParams(), np.random.default_rng(4), cfc=180.0, trigger_offset=0.001)
+    if not declared:
+        rec = {k: replace(s, cfc=None) for k, s in rec.items()}
+    base = simulate(RomParams())
+    raw = simulate(RomParams(), RomSettings(cfc=None))
+    rep = diagnose(base, rec, baseline_raw=raw)
+    assert rep.missing_physics == "sensor_dynamics"
+    h = next(h for h in rep.hypotheses if h["name"] == "sensor_dynamics")
+    assert h["variant"] == "filter_class"
+    assert h["parameters"] == {"filter_class": 180.0}
+    assert h["scenario_overrides"] == {"instrumentation.cfc": 180.0}
+    fc = rep.fit["filter_class"]
+    assert fc["mismatch"] and fc["class"] == 180.0 and fc["delta_bic"] > 100.0
+    assert fc["channels"]["accel_z"]["refilter"] == "from the raw channel"
+    assert rep.fit["residual_rms_sigma_after"] < 0.5 * rep.fit["residual_rms_sigma_before"]
+    assert rep.fit["after"]["overall"] > rep.fit["before"]["overall"]
+
+
+def test_same_class_is_not_a_filter_mismatch():
+    """Null: recording and simulation at CFC 60 -> no filter-class claim (the file need not
+    declare the class)."""
+    rec = acquire(RomParams(), np.random.default_rng(5), cfc=60.0)
+    rec = {k: replace(s, cfc=None) for k, s in rec.items()}
+    rep = diagnose(simulate(RomParams()), rec)
+    assert not rep.fit["filter_class"]["mismatch"]
+    assert rep.fit["filter_class"]["channels"]["accel_z"]["class_used"] == 60.0
+    assert rep.missing_physics is None
+
+
+def test_lower_class_refiltered_without_raw():
+    """CFC 60 recording, CFC 180 simulation, no raw channels: the baseline is filtered down."""
+    rec = acquire(RomParams(), np.random.default_rng(6), cfc=60.0)
+    base = simulate(RomParams(), RomSettings(cfc=180.0))
+    rep = diagnose(base, rec)
+    assert rep.missing_physics == "sensor_dynamics"
+    fc = rep.fit["filter_class"]
+    assert fc["class"] == 60.0
+    assert fc["channels"]["accel_z"]["refilter"].startswith("from the filtered channel")
