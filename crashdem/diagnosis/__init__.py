@@ -232,7 +232,15 @@ def _filter_class_stage(rec: dict[str, Signal], base: dict[str, Signal],
         b = base[ch].cfc
         entry = {**chk, "class_used": used, "source": how, "baseline_class": b,
                  "refilter": None}
-        if used is not None and b is not None and not math.isclose(float(used), float(b)):
+        if used is not None and b is None:
+            # an unfiltered baseline (raw simulation output) is compared at the recording's
+            # class: processing, not a mismatch of the simulation
+            bs = base[ch]
+            base2[ch] = Signal(bs.name, bs.t.copy(), _dsp.cfc(bs.data, bs.fs, float(used)),
+                               bs.unit, float(used),
+                               {**bs.meta, "refiltered": f"raw -> CFC {float(used):g}"})
+            entry["refilter"] = "unfiltered baseline filtered at the recording's class"
+        elif used is not None and b is not None and not math.isclose(float(used), float(b)):
             raw = (base_raw or {}).get(ch)
             bs = base[ch]
             if raw is not None:

@@ -101,3 +101,14 @@ def test_lower_class_refiltered_without_raw():
     fc = rep.fit["filter_class"]
     assert fc["class"] == 60.0
     assert fc["channels"]["accel_z"]["refilter"].startswith("from the filtered channel")
+
+
+def test_unfiltered_baseline_is_compared_at_the_recording_class():
+    """A raw (unfiltered) simulation against a CFC 60 recording of the same physics: the
+    baseline is filtered at the recording's class, which is processing, not missing physics."""
+    rec = acquire(RomParams(), np.random.default_rng(11), cfc=60.0)
+    rep = diagnose(simulate(RomParams(), RomSettings(cfc=None)), rec)
+    fc = rep.fit["filter_class"]
+    assert not fc["mismatch"]
+    assert fc["channels"]["accel_z"]["refilter"].startswith("unfiltered baseline")
+    assert rep.missing_physics is None
