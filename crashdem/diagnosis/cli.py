@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -153,6 +154,9 @@ def diagnose_command(args: argparse.Namespace) -> int:
     baseline, source = _baseline(scen, cmap, base_params, settings,
                                  mode=getattr(args, "baseline", None) or "run",
                                  out_dir=Path(args.out))
+    # unfiltered baseline channels, to compare at a recording's other filter class
+    base_raw = (simulate(base_params, replace(settings, cfc=None)) if source == "rom"
+                else _baseline_raw(source, cmap))
     n_full = getattr(args, "full_confirm", None)
     if n_full is None:
         # default: confirm the two best screened candidates with the full DEM (1 + 2 runs)
@@ -185,12 +189,12 @@ def diagnose_command(args: argparse.Namespace) -> int:
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
-                                  baseline_raw=_baseline_raw(source, cmap))
+                                  baseline_raw=base_raw)
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
     else:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
-                       baseline_raw=_baseline_raw(source, cmap))
+                       baseline_raw=base_raw)
     rep.simulations["baseline_source"] = source
     paths = write_report(rep, args.out)
     print(paths["json"])

@@ -47,6 +47,7 @@ from crashdem.diagnosis.generator_dem import BASE_OVERRIDES, SCENARIO, cache_dir
 from crashdem.signal import Signal
 
 SCRIPT = Path(__file__).resolve().parent / "yade_truth.py"
+HISTORY = Path(__file__).resolve().parents[1] / "yade_history.py"
 
 #: effect -> drawn parameters (low, high, scale); the parameter names are this module's
 YADE_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
@@ -96,9 +97,10 @@ def _scenario():
 
 
 def _fingerprint() -> str:
-    """Version of the Yade runs: the Yade script (every input of a run is in its ``cfg``,
-    which is part of the cache key; the acquisition in this module does not change a run)."""
-    return hashlib.sha256(SCRIPT.read_bytes()).hexdigest()[:12]
+    """Version of the Yade runs: the Yade script and its shared history recorder (every input
+    of a run is in its ``cfg``, which is part of the cache key; the acquisition in this module
+    does not change a run)."""
+    return hashlib.sha256(SCRIPT.read_bytes() + HISTORY.read_bytes()).hexdigest()[:12]
 
 
 def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, Any]]:

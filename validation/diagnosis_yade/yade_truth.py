@@ -22,8 +22,13 @@ import json
 import math
 import os
 import sys
+from pathlib import Path
 
 import numpy as np
+
+# inside Yade __file__ is the launcher; the script is sys.argv[0] (validation/<dir>/<script>)
+sys.path.insert(0, str(Path(sys.argv[0]).resolve().parents[2]))
+from validation.yade_history import finish, record_history  # noqa: E402
 
 cfg = json.load(open(sys.argv[1]))
 R_tank = cfg["tank_radius"]
@@ -139,16 +144,7 @@ O.engines = [  # noqa: F821
     NewtonIntegrator(damping=0.0, gravity=(0.0, 0.0, -g)),  # noqa: F821
 ]
 O.dt = cfg["dt_factor"] * PWaveTimeStep()  # noqa: F821
-n = int(math.ceil(cfg["t_end"] / O.dt))  # noqa: F821
-hist = np.zeros((n + 1, 4))
-b = O.bodies[did]  # noqa: F821
-hist[0] = (O.time, b.state.pos[2], b.state.vel[2], 0.0)  # noqa: F821
-for k in range(1, n + 1):
-    O.run(1, True)  # noqa: F821
-    hist[k] = (O.time, b.state.pos[2], b.state.vel[2], O.forces.f(did)[2])  # noqa: F821
-np.save(cfg["out"] + ".npy", hist)
-json.dump({"mass": b.state.mass, "steps": n, "dt": O.dt, "grains": int(len(rad)),  # noqa: F821
-           "surface_z": surface, "drop_top_z": top}, open(cfg["out"] + ".json", "w"))
-print("YADE_DONE")
-sys.stdout.flush()
-os._exit(0)
+record_history(O, did, cfg["t_end"], cfg["out"],  # noqa: F821
+               {"dt": O.dt, "grains": int(len(rad)), "surface_z": surface,  # noqa: F821
+                "drop_top_z": top})
+finish()

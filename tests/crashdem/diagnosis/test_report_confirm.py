@@ -84,6 +84,29 @@ def test_cli_diagnose_end_to_end(tmp_path):
     assert (out / "overlay_accel_z.png").exists()
 
 
+def test_cli_rom_baseline_filter_class(tmp_path):
+    """``crashdem diagnose --baseline rom`` on a CSV recording filtered at CFC 180 that does not
+    say so: the class is measured and the ROM baseline is compared at it (its raw channels are
+    simulated), named ``sensor_dynamics`` with the class."""
+    from dataclasses import replace
+
+    from crashdem import cli, recordings
+    from crashdem.diagnosis.generator import acquire
+
+    rec = acquire(RomParams(), np.random.default_rng(12), cfc=180.0)
+    rec_path = recordings.write_recording(tmp_path / "rec.csv",
+                                          {k: replace(s, cfc=None) for k, s in rec.items()})
+    scen = tmp_path / "s.toml"
+    scen.write_text(SCENARIO_TOML)
+    out = tmp_path / "out"
+    assert cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
+                     "--out", str(out), "--baseline", "rom"]) == 0
+    d = json.loads((out / "report.json").read_text())
+    assert d["missing_physics"] == "sensor_dynamics", d["decision"]
+    assert d["fit"]["filter_class"]["class"] == 180.0
+    assert d["fit"]["filter_class"]["channels"]["accel_z"]["refilter"] == "from the raw channel"
+
+
 def test_recording_units_do_not_matter(layering_case):
     """Same diagnosis when the recorded acceleration is given in g (converted to SI on entry)."""
     from crashdem.signal import G0, Signal
