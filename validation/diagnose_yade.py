@@ -38,11 +38,13 @@ FILTER_CLASSES = (180.0, 600.0, 1000.0)
 
 
 def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
-                  filter_class: bool = False) -> dict:
+                  filter_class: bool = False, raw: bool = False) -> dict:
     """Make (or load) one Yade case and diagnose it; returns the table row.
 
     ``filter_class``: the null physics of ``seed`` acquired at a class drawn from
-    ``FILTER_CLASSES`` and not declared (truth: ``sensor_dynamics``, filter-class form)."""
+    ``FILTER_CLASSES`` and not declared (truth: ``sensor_dynamics``, filter-class form).
+    ``raw``: the recording is Yade's raw output (no acquisition, no noise, no filter, no
+    pre-trigger; ``cases.yade_case(..., raw=True)``)."""
     import numpy as np
 
     from crashdem.diagnosis import screen_then_confirm
@@ -55,7 +57,7 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
         case = yade_case(seed, None, cfc=cfc, declare_cfc=False)
         effect = "sensor_dynamics"
     else:
-        case = yade_case(seed, effect)
+        case = yade_case(seed, effect, raw=raw)
     t1 = time.perf_counter()
     rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
                               impact_speed=impact_speed(), baseline_raw=dem_baseline_raw())
@@ -90,6 +92,9 @@ def main(argv=None) -> int:
     ap.add_argument("--filter-seeds", nargs="*", type=int, default=[21, 22],
                     help="null Yade runs re-acquired at another, undeclared filter class "
                          "(truth: sensor_dynamics, filter-class form)")
+    ap.add_argument("--raw", action="store_true",
+                    help="diagnose Yade's raw output (no lab acquisition: no noise, filter or "
+                         "pre-trigger) instead of lab channels")
     ap.add_argument("--top-k", type=int, default=TOP_K)
     args = ap.parse_args(argv)
     if not yade_available():
@@ -100,7 +105,7 @@ def main(argv=None) -> int:
     rows = []
     for eff in args.effects:
         for s in args.seeds:
-            rows.append(diagnose_case(eff, s, args.top_k))
+            rows.append(diagnose_case(eff, s, args.top_k, raw=args.raw))
             r = rows[-1]
             print(f"{eff:20s} seed {s}: claimed={r['claimed']} top={r['top_ranked']} "
                   f"dBIC={r['top_delta_bic']:.1f} score {r['score_before']:.3f} -> "
@@ -108,14 +113,14 @@ def main(argv=None) -> int:
                   f"errors={ {k: f'{v:+.0%}' for k, v in r['parameter_errors'].items()} } "
                   f"full runs={r['full_simulations']} ({r['case_wall_s']:.0f} s + "
                   f"{r['diagnosis_wall_s']:.0f} s)", flush=True)
-    for s in args.filter_seeds:
+    for s in ([] if args.raw else args.filter_seeds):
         rows.append(diagnose_case(None, s, args.top_k, filter_class=True))
         r = rows[-1]
         print(f"{'filter class':20s} seed {s}: CFC {r['drawn']['filter_class']:g} claimed="
               f"{r['claimed']} top={r['top_ranked']} fitted={r['fitted']} score "
               f"{r['score_before']:.3f} -> {r['score_after']:.3f}", flush=True)
     for s in args.nulls:
-        rows.append(diagnose_case(None, s, args.top_k))
+        rows.append(diagnose_case(None, s, args.top_k, raw=args.raw))
         r = rows[-1]
         print(f"{'null':20s} seed {s}: claimed={r['claimed']} top={r['top_ranked']} "
               f"dBIC={r['top_delta_bic']:.1f} score {r['score_before']:.3f} -> "

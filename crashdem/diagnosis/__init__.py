@@ -200,27 +200,84 @@ def _fit_checked_sensor(problem: FitProblem, h: Hypothesis, check: Mapping[str, 
 FILTER_CLASS_VARIANT = "filter_class"
 
 
+#: a channel filtered at CFC c has at most this fraction of its event power above
+#: ``BAND_TEST_FACTOR`` x c (measured, noise-free: CFC 60 ROM and DEM channels 1.4e-9-1.3e-8;
+#: CFC 180 4e-6-4e-5, unfiltered ROM / DEM / Yade output 7e-5-4e-4 above 400 Hz)
+BAND_TEST_FRACTION = 1.0e-6
+#: the band test's lower frequency as a multiple of the class (6.67 x CFC = 4 x its -3 dB
+#: frequency of ~1.67 x CFC, where the 4-pole J211 response is below 1e-4 in power)
+BAND_TEST_FACTOR = 6.67
+
+
+def _power_above(sig: Signal, f0: float, t_from: float) -> float | None:
+    """Fraction of a channel's power above ``f0`` [Hz] from ``t_from`` on (Hann periodogram);
+    None when ``f0`` is beyond 0.9 x Nyquist or the segment is too short."""
+    from scipy import signal as sps
+
+    m = sig.t >= t_from
+    if m.sum() < 64 or f0 >= 0.45 * sig.fs:
+        return None
+    f, p = sps.periodogram(sig.data[m], fs=sig.fs, window="hann", detrend="constant")
+    tot = float(np.sum(p))
+    return float(np.sum(p[f > f0]) / tot) if tot > 0.0 else None
+
+
 def _filter_class_stage(rec: dict[str, Signal], base: dict[str, Signal],
                         base_raw: Mapping[str, Signal] | None, channels: list[str],
-                        noise: Mapping[str, NoiseEstimate], accept_margin: float
+                        noise: Mapping[str, NoiseEstimate], accept_margin: float,
+                        shift: float = 0.0, t_quiet_end: float | None = None
                         ) -> tuple[dict[str, Signal], dict[str, Signal], dict[str, Any]]:
     """Filter class of each recorded channel (declared, or read from its pre-event noise
     spectrum: ``filter_check``) against the baseline's; where they differ the baseline is
     re-filtered at the recording's class (from its raw channel when given, else -- only to a
     lower class -- from its filtered one), so that everything after compares like with like.
 
+    A recording that declares no class and holds no noise to read one from (noise at the
+    acquisition floor: a simulation's output) is tested on its event instead: more than
+    ``BAND_TEST_FRACTION`` of its power above ``BAND_TEST_FACTOR`` x the baseline's class means
+    it was not filtered at that class (raw output, or a wider class); it is then filtered at
+    the baseline's class for the comparison (processing, not a finding), else taken to be at it.
+
     Returns the recording (``cfc`` set to the class used), the baseline to diagnose on, and
     ``{"channels": {ch: check + class_used, source, baseline_class, refilter}, "mismatch",
-    "class", "delta_bic"}``."""
+    "class", "delta_bic", "recording_filtered"}``."""
     rec2, base2 = dict(rec), dict(base)
     quiet = noise[channels[0]].window
+    if quiet is not None and t_quiet_end is not None:  # never past the event onset
+        quiet = (quiet[0], min(quiet[1], t_quiet_end))
+        if quiet[1] <= quiet[0]:
+            quiet = None
     per: dict[str, Any] = {}
-    mism, classes, evidence = False, [], 0.0
+    mism, classes, evidence, rec_filtered = False, [], 0.0, []
     for ch in channels:
         r = rec[ch]
-        chk = filter_class_check(r, quiet or noise[ch].window, declared=r.cfc,
-                                 accept_margin=accept_margin)
+        if "below the floor" in noise[ch].method:
+            chk = {"applicable": False, "declared": r.cfc,
+                   "reason": "noise at the acquisition floor (a noise-free record)"}
+        else:
+            chk = filter_class_check(r, quiet, declared=r.cfc, accept_margin=accept_margin)
         used, how = r.cfc, "declared by the recording"
+        b = base[ch].cfc
+        if r.cfc is None and not chk.get("applicable") and b is not None:
+            t_on = float(base[ch].t[0]) + shift
+            frac = _power_above(r, BAND_TEST_FACTOR * float(b), t_on)
+            chk["event_power_above"] = {"f_hz": BAND_TEST_FACTOR * float(b), "fraction": frac}
+            if frac is not None and frac > BAND_TEST_FRACTION:
+                rec2[ch] = Signal(r.name, r.t, _dsp.cfc(r.data, r.fs, float(b)), r.unit, float(b),
+                                  {**r.meta, "filtered_by_diagnosis": f"CFC {float(b):g}"})
+                rec_filtered.append(ch)
+                per[ch] = {**chk, "class_used": float(b), "baseline_class": b, "refilter": None,
+                           "source": (f"no class declared, no noise to read one from, event "
+                                      f"power above {BAND_TEST_FACTOR * float(b):.0f} Hz "
+                                      f"{frac:.1e} > {BAND_TEST_FRACTION:g}: unfiltered or a "
+                                      f"wider class; filtered at the baseline's CFC {float(b):g} "
+                                      "for the comparison")}
+                continue
+            if frac is not None:
+                used, how = float(b), (f"no class declared, no noise to read one from; event "
+                                       f"power above {BAND_TEST_FACTOR * float(b):.0f} Hz "
+                                       f"{frac:.1e} <= {BAND_TEST_FRACTION:g}: taken as the "
+                                       f"baseline's CFC {float(b):g}")
         if chk.get("applicable") and chk["decisive"]:
             if r.cfc is None:
                 used, how = chk["measured"], "measured (the recording declares none)"
@@ -229,7 +286,6 @@ def _filter_class_stage(rec: dict[str, Signal], base: dict[str, Signal],
                                               f"{r.cfc:g}, its noise spectrum says otherwise)")
         if used != r.cfc:
             rec2[ch] = replace(r, cfc=used)
-        b = base[ch].cfc
         entry = {**chk, "class_used": used, "source": how, "baseline_class": b,
                  "refilter": None}
         if used is not None and b is None:
@@ -263,7 +319,8 @@ def _filter_class_stage(rec: dict[str, Signal], base: dict[str, Signal],
         per[ch] = entry
     return rec2, base2, {"channels": per, "mismatch": mism,
                          "class": classes[0] if classes else None,
-                         "delta_bic": evidence if evidence > 0 else None}
+                         "delta_bic": evidence if evidence > 0 else None,
+                         "recording_filtered": rec_filtered}
 
 
 #: cosine similarity (recording vs baseline over the event) below which a channel is read as
@@ -314,12 +371,19 @@ def measured_impact_speed(acc: Signal, vel: Signal, noise_vel: NoiseEstimate,
     w = v_s.t <= t_on - PRE_ONSET
     if noise_vel.window:
         w &= v_s.t >= noise_vel.window[0]
-    if w.sum() < 8:
+    how = "pre-event segment"
+    if w.sum() < 8 and a_s.cfc is None and v_s.cfc is None:
+        # unfiltered channels (a simulation's output starting just before contact): nothing
+        # smears the contact backwards, every sample before the onset is free fall
+        w = v_s.t < t_on
+        how = "unfiltered samples before the onset"
+    if w.sum() < 1 or (how == "pre-event segment" and w.sum() < 8):
         return None
     c = float(np.mean(v_s.data[w] + gravity * (v_s.t[w] - t_on)))
     n_eff = _dsp.effective_samples(int(w.sum()), v_s.fs, v_s.cfc)
     sig = math.hypot(noise_vel.sigma / math.sqrt(max(n_eff, 1.0)), gravity * IMPACT_ONSET_TIMING)
-    return {"impact_speed": -c, "sigma": sig, "onset_s": t_on, "samples": int(w.sum())}
+    return {"impact_speed": -c, "sigma": sig, "onset_s": t_on, "samples": int(w.sum()),
+            "segment": how}
 
 
 def _residual_n_eff(problem: FitProblem, res: FitResult) -> float:
@@ -502,14 +566,21 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     shift0 = onset_time(rec[primary], sigma_p) - onset_time(base[primary], 0.0)
     t0 = onset_time(rec[primary], sigma_p) - PRE_ONSET
     rec, signs = _sign_convention(rec, base, channels, shift0, t0)
+    # the filter class of the recording against the baseline's: from here on both are compared
+    # at the recording's class; "before" (mismatch windows, score) is the baseline as the user
+    # has it against the recording as processed here
+    base_user = base
+    rec_given, noise_given = dict(rec), dict(noise)  # before any filtering by the diagnosis
+    rec, base, fclass = _filter_class_stage(
+        rec, base, _si(baseline_raw) if baseline_raw else None, channels, noise, accept_margin,
+        shift0, t0)
+    for ch in fclass["recording_filtered"]:  # noise of a channel filtered here
+        qw = noise[primary].window
+        noise[ch] = estimate_noise(rec[ch], quiet=qw) if qw else estimate_noise(rec[ch])
     windows: list[MismatchWindow] = []
     for ch in channels:
-        windows += locate_mismatch(rec[ch], base[ch], noise[ch], shift=shift0)
-    base_aligned = {ch: align(rec[ch], base[ch], shift0) for ch in channels}
-    # the filter class of the recording against the baseline's: from here on both are compared
-    # at the recording's class (the "before" above is the baseline as the user has it)
-    rec, base, fclass = _filter_class_stage(
-        rec, base, _si(baseline_raw) if baseline_raw else None, channels, noise, accept_margin)
+        windows += locate_mismatch(rec[ch], base_user[ch], noise[ch], shift=shift0)
+    base_aligned = {ch: align(rec[ch], base_user[ch], shift0) for ch in channels}
     filter_found = bool(fclass["mismatch"]) and "sensor_dynamics" in (
         list(hypotheses) if hypotheses is not None else list(catalogue.NAMES))
 
@@ -590,8 +661,10 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     v_nom = impact_speed if impact_speed is not None else (rom_base.v0 if rom_base else None)
     speed: dict[str, Any] | None = None
     if v_nom is not None and VELOCITY in channels and ACCEL in rec:
-        speed = measured_impact_speed(rec[ACCEL], rec[VELOCITY], noise[VELOCITY],
-                                      noise[ACCEL].sigma if ACCEL in noise else sigma_p)
+        # on the channels as recorded (a channel filtered here would smear the contact into
+        # the free fall)
+        speed = measured_impact_speed(rec_given[ACCEL], rec_given[VELOCITY],
+                                      noise_given[VELOCITY], noise_given[ACCEL].sigma)
         if speed is not None:
             speed.update(nominal=float(v_nom), offset=speed["impact_speed"] - float(v_nom))
             if not abs(speed["offset"]) < 0.5 * float(v_nom):

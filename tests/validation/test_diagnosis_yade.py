@@ -49,3 +49,16 @@ def test_yade_filter_class_is_named():
     row = diagnose_case(None, 21, filter_class=True)
     assert row["claimed"] == "sensor_dynamics", row["decision"]
     assert row["fitted"] == {"filter_class": row["drawn"]["filter_class"]}
+
+
+@pytest.mark.parametrize("effect, seed", [(None, 21), ("initial_conditions", 11)])
+def test_yade_raw_output(effect, seed):
+    """Yade's raw output as the recording (no lab acquisition: no noise, no filter, no
+    pre-trigger, 20 kHz): the null claims nothing, the speed offset is named within 2 %
+    (read from the unfiltered samples before contact), as on the lab channels."""
+    from validation.diagnose_yade import diagnose_case
+
+    row = diagnose_case(effect, seed, raw=True)
+    assert row["claimed"] == effect, row["decision"]
+    if effect is not None:
+        assert abs(row["parameter_errors"]["speed_offset"]) < 0.02

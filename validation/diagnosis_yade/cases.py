@@ -127,14 +127,22 @@ def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, An
     return np.load(str(out) + ".npy"), json.loads(Path(str(out) + ".json").read_text())
 
 
+#: sample rate of the raw Yade output of ``yade_case(..., raw=True)`` [Hz]
+RAW_SAMPLE_RATE = 20000.0
+
+
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
-              cfc: float = 60.0, declare_cfc: bool = True) -> YadeCase:
+              cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False) -> YadeCase:
     """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
     drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline.
 
     ``cfc``: the lab's filter class (the baseline's is 60: another class is the
     ``sensor_dynamics`` filter-class form); ``declare_cfc=False`` leaves it out of the channels
-    (a CSV without a header)."""
+    (a CSV without a header). ``raw=True``: the recording is Yade's own output instead of a
+    lab channel -- the drop mass's specific force and velocity from the start of the Yade run
+    (the sphere 1 cm above the grains, so under 1 ms before contact), linearly resampled at
+    ``RAW_SAMPLE_RATE``, no noise, no filter, no trigger offset (the sensor effect still
+    applied)."""
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
@@ -184,6 +192,17 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
 
         acc = MountDynamics(drawn["natural_frequency"], drawn["damping_ratio"],
                             drawn["model"]).apply(Signal("a", t_raw, acc, "m/s^2")).data
+    if raw:
+        tu = np.arange(0.0, float(t[-1]) - float(t[0]), 1.0 / RAW_SAMPLE_RATE)
+        a_full = np.interp(t, t[sel], acc, left=0.0)  # free fall before contact: 0
+        rec = {"accel_z": Signal("accel_z", tu, np.interp(tu + t[0], t, a_full), "m/s^2", None,
+                                 {"source": "Yade 2023.02a output (raw)"}),
+               "velocity_z": Signal("velocity_z", tu, np.interp(tu + t[0], t, vz), "m/s", None,
+                                    {"source": "Yade 2023.02a output (raw)"})}
+        values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
+        return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
+                        {"grains": info["grains"], "dt": info["dt"], "radius": radius,
+                         "dt_factor": dt_factor, "trigger_offset_s": 0.0, "raw": True})
     rec = acquire_samples(t_raw, {"accel_z": (acc, "m/s^2"), "velocity_z": (vz[sel], "m/s")},
                           float(-vz[sel][0]), rng, trigger_offset=offset, cfc=cfc,
                           t_end=float(scen["solver.t_end"]),

@@ -112,3 +112,46 @@ def test_unfiltered_baseline_is_compared_at_the_recording_class():
     assert not fc["mismatch"]
     assert fc["channels"]["accel_z"]["refilter"].startswith("unfiltered baseline")
     assert rep.missing_physics is None
+
+
+@pytest.mark.parametrize("offset", [0.0, -2.5])
+def test_raw_noise_free_output_is_compared_at_the_baseline_class(offset):
+    """A simulation's raw output as the "recording" (another code: no noise, no filter, no class
+    declared, starting 20 ms before contact): its class cannot be read from noise, its event
+    holds power above 6.67 x CFC 60, so the diagnosis filters it at the baseline's CFC 60
+    (processing, not a finding); the impact speed is read from the free fall as recorded.
+    Null -> nothing claimed; a speed offset -> named within 2 %. (Yade's raw output, starting
+    under 1 ms before contact, is in tests/validation/test_diagnosis_yade.py.)"""
+    raw = simulate(RomParams(speed_offset=offset), RomSettings(cfc=None, t_pre=0.02))
+    rec = {k: raw[k] for k in ("accel_z", "velocity_z")}
+    rep = diagnose(simulate(RomParams()), rec, impact_speed=RomParams().v0)
+    fc = rep.fit["filter_class"]
+    assert not fc["mismatch"]
+    assert "accel_z" in fc["recording_filtered"]
+    assert fc["channels"]["accel_z"]["event_power_above"]["fraction"] > 1e-6
+    chk = rep.fit["impact_speed_check"]
+    assert chk["offset"] == pytest.approx(offset, abs=0.05)
+    if offset == 0.0:
+        assert rep.missing_physics is None, rep.decision
+    else:
+        assert rep.missing_physics == "initial_conditions"
+        h = next(x for x in rep.hypotheses if x["name"] == "initial_conditions")
+        assert h["parameters"]["speed_offset"] == pytest.approx(offset, rel=0.02)
+
+
+def test_noise_free_recording_at_the_baseline_class_is_kept():
+    """A noise-free recording filtered at the baseline's CFC 60 (no class declared): the band
+    test finds no power beyond the class, the recording is taken to be at CFC 60 and left as it
+    is."""
+    rec = acquire(RomParams(), np.random.default_rng(1), cfc=60.0,
+                  noise={"accel_z": 0.0, "velocity_z": 0.0})
+    rec = {k: replace(s, cfc=None) for k, s in rec.items()}
+    rep = diagnose(simulate(RomParams()), rec)
+    fc = rep.fit["filter_class"]
+    assert fc["recording_filtered"] == [] and not fc["mismatch"]
+    assert all(v["class_used"] == 60.0 for v in fc["channels"].values())
+    # the velocity's pre-event noise is at the floor: its class comes from the band test (the
+    # acceleration's quiet window holds the filter's precursor of the impact, which the noise
+    # spectrum reads as CFC 60)
+    assert fc["channels"]["velocity_z"]["event_power_above"]["fraction"] < 1e-6
+    assert rep.missing_physics is None
