@@ -120,6 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--scenario", required=True)
     d.add_argument("--recording", required=True)
     d.add_argument("--channel", action="append")
+    d.add_argument("--unit", action="append", metavar="NAME=UNIT",
+                   help="unit of a CSV column whose header gives none (e.g. accel_z=g)")
     d.add_argument("--out", required=True)
     d.add_argument("--set", action="append", metavar="KEY=VALUE")
     d.add_argument("--full-confirm", type=int, default=None,

@@ -140,7 +140,8 @@ def detect_format(path: str | Path) -> str:
 
 def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
                    format: str | None = None, cfc: float | None = None,
-                   strict_fs: bool = True) -> dict[str, Signal]:
+                   strict_fs: bool = True,
+                   units: Mapping[str, str] | None = None) -> dict[str, Signal]:
     """Read a recording and validate every channel.
 
     Parameters
@@ -151,6 +152,8 @@ def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
     cfc : if given, check the sample rate of every channel against this CFC [Hz] and return the
         channels filtered with it (``crashdem.filters.cfc_filter``; method in ``meta['filter']``)
     strict_fs : see ``validate``
+    units : CSV only: unit of each named column whose header (and ``# channel: NAME; unit=U``
+        comment) gives none, e.g. ``{"accel_z": "g"}``; a unit the file gives is never replaced
 
     Returns
     -------
@@ -167,7 +170,7 @@ def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
         raise RecordingError(f"format={fmt!r}: must be one of {FORMATS}")
     try:
         if fmt == "csv":
-            sigs = _read_csv(path)
+            sigs = _read_csv(path, units)
         elif fmt == "hdf5":
             sigs = _read_hdf5(path)
         else:
@@ -281,7 +284,7 @@ def _to_float(cell: str, decimal_comma: bool) -> float:
     return float(c)
 
 
-def _read_csv(path: Path) -> dict[str, Signal]:
+def _read_csv(path: Path, units: Mapping[str, str] | None = None) -> dict[str, Signal]:
     text = _decode_text(path.read_bytes())
     lines = text.splitlines()
     meta: dict[str, dict[str, str]] = {}
@@ -337,10 +340,15 @@ def _read_csv(path: Path) -> dict[str, Signal]:
     out: dict[str, Signal] = {}
     for c in range(1, ncol):
         name, unit = header[c]
+        m = dict(meta.get(name, {}))
+        if unit is None:
+            unit = m.pop("unit", None) or (units or {}).get(name)
         if unit is None:
             raise RecordingError(f"{path}: channel {name!r}: no unit in the header (write "
-                                 f"'{name} [unit]')")
-        m = dict(meta.get(name, {}))
+                                 f"'{name} [unit]', a '# channel: {name}; unit=UNIT' line, or "
+                                 f"give it to the reader: units={{{name!r}: UNIT}}, "
+                                 f"crashdem diagnose --unit {name}=UNIT)")
+
         cfc = None
         if "cfc" in m:
             v = m.pop("cfc")

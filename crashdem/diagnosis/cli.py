@@ -139,7 +139,13 @@ def diagnose_command(args: argparse.Namespace) -> int:
 
     overrides = dict(sc.parse_override(s) for s in (getattr(args, "set", None) or []))
     scen = sc.load(args.scenario, overrides)
-    raw = read_recording(args.recording)
+    units = {}
+    for spec in getattr(args, "unit", None) or []:
+        name, sep, unit = spec.partition("=")
+        if not sep or not name.strip() or not unit.strip():
+            raise ValueError(f"--unit {spec!r}: must be NAME=UNIT, e.g. accel_z=g")
+        units[name.strip()] = unit.strip()
+    raw = read_recording(args.recording, units=units or None)
     cmap = _channel_map(getattr(args, "channel", None), raw)
     rec = {rom_name: Signal(rom_name, raw[name].t, raw[name].data, raw[name].unit, raw[name].cfc,
                             {**raw[name].meta, "recorded_name": name})

@@ -172,6 +172,23 @@ def test_error_unknown_format_and_missing_unit(tmp_path):
         read_recording(tmp_path / "nounit.csv")
 
 
+def test_units_given_outside_the_header(tmp_path):
+    """A CSV without units in its header: the unit of a column comes from a '# channel' comment
+    or from the reader's ``units`` (never replacing a unit the file gives); an unknown unit is
+    refused by name."""
+    (tmp_path / "u.csv").write_text("time,acc,vel [m/s]\n0,1,2\n0.001,2,3\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"channel 'acc': no unit .*--unit acc=UNIT"):
+        read_recording(tmp_path / "u.csv", strict_fs=False)
+    r = read_recording(tmp_path / "u.csv", strict_fs=False, units={"acc": "g", "vel": "km/h"})
+    assert r["acc"].unit == "g" and r["vel"].unit == "m/s"
+    assert r["acc"].to_si().data[0] == pytest.approx(9.80665)
+    (tmp_path / "c.csv").write_text("# channel: acc; unit=m/s^2\ntime,acc\n0,1\n0.001,2\n",
+                                    encoding="utf-8")
+    assert read_recording(tmp_path / "c.csv", strict_fs=False)["acc"].unit == "m/s^2"
+    with pytest.raises(RecordingError, match=r"'acc'.*unit"):
+        read_recording(tmp_path / "u.csv", strict_fs=False, units={"acc": "furlong"})
+
+
 def test_write_csv_needs_common_time(tmp_path):
     a = Signal("a", np.arange(5) * 1e-3, np.ones(5), "g")
     b = Signal("b", np.arange(5) * 2e-3, np.ones(5), "g")

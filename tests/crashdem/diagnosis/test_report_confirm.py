@@ -107,6 +107,29 @@ def test_cli_rom_baseline_filter_class(tmp_path):
     assert d["fit"]["filter_class"]["channels"]["accel_z"]["refilter"] == "from the raw channel"
 
 
+def test_cli_units_given_on_the_command_line(tmp_path):
+    """A plain CSV (header ``time,accel_z,velocity_z``, no units) diagnosed with ``--unit``;
+    without it the error names the column and the option."""
+    from crashdem import cli
+    from crashdem.diagnosis.generator import acquire
+
+    rec = acquire(RomParams(speed_offset=-2.0), np.random.default_rng(13))
+    a, v = rec["accel_z"], rec["velocity_z"]
+    rows = "\n".join(f"{float(t)!r},{float(x)!r},{float(y)!r}"
+                      for t, x, y in zip(a.t, a.data / 9.80665, v.data))
+    path = tmp_path / "plain.csv"
+    path.write_text("time,accel_z,velocity_z\n" + rows + "\n", encoding="utf-8")
+    scen = tmp_path / "s.toml"
+    scen.write_text(SCENARIO_TOML)
+    out = tmp_path / "out"
+    argv = ["diagnose", "--scenario", str(scen), "--recording", str(path), "--out", str(out),
+            "--baseline", "rom"]
+    assert cli.main(argv) != 0  # no units: refused with the column named
+    assert cli.main(argv + ["--unit", "accel_z=g", "--unit", "velocity_z=m/s"]) == 0
+    d = json.loads((out / "report.json").read_text())
+    assert d["missing_physics"] == "initial_conditions", d["decision"]
+
+
 def test_recording_units_do_not_matter(layering_case):
     """Same diagnosis when the recorded acceleration is given in g (converted to SI on entry)."""
     from crashdem.signal import G0, Signal
