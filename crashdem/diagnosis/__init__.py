@@ -112,6 +112,36 @@ def _si(signals: Mapping[str, Signal]) -> dict[str, Signal]:
     return {k: s.to_si() for k, s in signals.items()}
 
 
+#: relative deviation of a sample interval from the median above which a channel counts as
+#: non-uniformly sampled (float rounding of printed times stays far below)
+UNIFORM_TOLERANCE = 1.0e-3
+
+
+def _uniform(signals: Mapping[str, Signal]) -> tuple[dict[str, Signal], dict[str, Any]]:
+    """Channels on uniform time grids: a non-uniformly sampled channel (another code's output
+    at variable steps) is linearly interpolated at its median rate, since the filters, spectra
+    and noise estimates of the diagnosis assume uniform sampling. Returns the channels and
+    ``{name: {"from_samples", "to_samples", "rate_hz", "max_interval_deviation"}}``."""
+    out, info = {}, {}
+    for k, s in signals.items():
+        dt = np.diff(s.t)
+        if dt.size < 2:
+            out[k] = s
+            continue
+        med = float(np.median(dt))
+        dev = float(np.max(np.abs(dt - med))) / med
+        if dev <= UNIFORM_TOLERANCE:
+            out[k] = s
+            continue
+        n = int(math.floor((s.t[-1] - s.t[0]) / med)) + 1
+        t = s.t[0] + med * np.arange(n)
+        out[k] = Signal(s.name, t, np.interp(t, s.t, s.data), s.unit, s.cfc,
+                        {**s.meta, "resampled": f"non-uniform -> {1.0 / med:.6g} Hz"})
+        info[k] = {"from_samples": int(s.t.size), "to_samples": int(n), "rate_hz": 1.0 / med,
+                   "max_interval_deviation": dev}
+    return out, info
+
+
 def _evidence(h: Hypothesis, res: FitResult, before: list[MismatchWindow],
               after: list[MismatchWindow], base_rms: float) -> str:
     """One sentence saying what the fitted hypothesis changes."""
@@ -538,7 +568,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     t_start = time.perf_counter()
     if anchor_index not in ("time", "depth"):
         raise ValueError(f"anchor_index={anchor_index!r}: must be 'time' or 'depth'")
-    rec = _si(recording_signals)
+    rec, resampled = _uniform(_si(recording_signals))
     base = _si(baseline_signals)
     if channels is None:
         channels = [c for c in ROM_CHANNELS if c in rec and c in base] if simulator is None else \
@@ -838,6 +868,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "impact_speed_check": speed,
         "filter_class": fclass,
         "sign_convention": signs,
+        "resampled": resampled,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
     # filtered noise, or far above it, is model-form error the catalogue does not cover

@@ -155,3 +155,28 @@ def test_noise_free_recording_at_the_baseline_class_is_kept():
     # spectrum reads as CFC 60)
     assert fc["channels"]["velocity_z"]["event_power_above"]["fraction"] < 1e-6
     assert rep.missing_physics is None
+
+
+@pytest.mark.parametrize("offset", [0.0, -2.5])
+def test_non_uniform_time_axis_is_resampled(offset):
+    """Another code's output at variable time steps (intervals 0.7-1.3 x the mean, no noise,
+    no filter): resampled on a uniform grid at the median rate, then diagnosed as usual (null
+    -> nothing claimed; a speed offset -> named within 2 %)."""
+    fine = simulate(RomParams(speed_offset=offset), RomSettings(cfc=None, t_pre=0.02,
+                                                                  sample_rate=20000.0, dt=5e-6))
+    rng = np.random.default_rng(14)
+    t = np.cumsum(rng.uniform(0.7, 1.3, 1400) * 1e-4) + float(fine["accel_z"].t[0])
+    t = t[t <= fine["accel_z"].t[-1]]
+    rec = {k: replace(fine[k], t=t, data=np.interp(t, fine[k].t, fine[k].data))
+           for k in ("accel_z", "velocity_z")}
+    rep = diagnose(simulate(RomParams()), rec, impact_speed=RomParams().v0)
+    rs = rep.fit["resampled"]
+    assert set(rs) == {"accel_z", "velocity_z"}
+    assert rs["accel_z"]["max_interval_deviation"] > 0.2
+    assert rep.recording["accel_z"].fs == pytest.approx(rs["accel_z"]["rate_hz"])
+    if offset == 0.0:
+        assert rep.missing_physics is None, rep.decision
+    else:
+        assert rep.missing_physics == "initial_conditions", rep.decision
+        h = next(x for x in rep.hypotheses if x["name"] == "initial_conditions")
+        assert h["parameters"]["speed_offset"] == pytest.approx(offset, rel=0.02)
