@@ -142,6 +142,17 @@ def _uniform(signals: Mapping[str, Signal]) -> tuple[dict[str, Signal], dict[str
     return out, info
 
 
+def _noise_in_window(sig: Signal, quiet: tuple[float, float] | None) -> NoiseEstimate:
+    """Noise of a channel over the primary channel's quiet window (its own when there is none
+    or the window does not fit the channel)."""
+    if quiet:
+        try:
+            return estimate_noise(sig, quiet=quiet)
+        except ValueError:
+            pass
+    return estimate_noise(sig)
+
+
 def _evidence(h: Hypothesis, res: FitResult, before: list[MismatchWindow],
               after: list[MismatchWindow], base_rms: float) -> str:
     """One sentence saying what the fitted hypothesis changes."""
@@ -585,12 +596,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         # the primary (first) channel locates the quiet pre-event window; the other channels use
         # the same window (a slowly varying channel such as a velocity shows its onset late)
         noise = {primary: estimate_noise(rec[primary])}
-        qw = noise[primary].window
         for ch in channels[1:]:
-            try:
-                noise[ch] = estimate_noise(rec[ch], quiet=qw) if qw else estimate_noise(rec[ch])
-            except ValueError:
-                noise[ch] = estimate_noise(rec[ch])
+            noise[ch] = _noise_in_window(rec[ch], noise[primary].window)
     noise = dict(noise)
     sigma_p = noise[primary].sigma
     shift0 = onset_time(rec[primary], sigma_p) - onset_time(base[primary], 0.0)
@@ -605,8 +612,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         rec, base, _si(baseline_raw) if baseline_raw else None, channels, noise, accept_margin,
         shift0, t0)
     for ch in fclass["recording_filtered"]:  # noise of a channel filtered here
-        qw = noise[primary].window
-        noise[ch] = estimate_noise(rec[ch], quiet=qw) if qw else estimate_noise(rec[ch])
+        noise[ch] = _noise_in_window(rec[ch], noise[primary].window)
     windows: list[MismatchWindow] = []
     for ch in channels:
         windows += locate_mismatch(rec[ch], base_user[ch], noise[ch], shift=shift0)

@@ -290,13 +290,7 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
     eff_ov = draw_dem_effect(effect, rng) if effect is not None else {}
     num = truth_numerics(rng, seed)
     truth_ov = {**num, **eff_ov}
-    raw, info = run_dem(truth_ov, filtered=False, cache=cache)
-    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
-    acc, vel = raw["accel_z"], raw["velocity_z"]
-    rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
-                          float(-vel.data[0]), rng, trigger_offset=offset,
-                          source=f"crashdem DEM truth (seed {num['scenario.seed']}, radius "
-                                 f"{num['soil.radius']:g} m, safety {num['solver.safety']:g})")
+    rec, meta, offset = _acquired_truth(truth_ov, rng, cache)
     values: dict[str, float] = {}
     drawn: dict[str, float] = {}
     if effect is not None:
@@ -304,9 +298,26 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
             values[rom_name] = float(eff_ov[f"physics.{effect}.{key}"])
         drawn = {k: (v if isinstance(v, str) else float(v)) for k, v in eff_ov.items()
                  if not k.endswith(".enabled")}
-    return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset,
-                            {"particles": info.get("particles"), "dt": info.get("dt"),
-                             "wall_s": info.get("wall_s")}, drawn, dem_baseline(cache))
+    return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset, meta, drawn,
+                            dem_baseline(cache))
+
+
+def _acquired_truth(truth_ov: dict[str, Any], rng: np.random.Generator, cache: Path | None,
+                    cfc: float = 60.0) -> tuple[dict[str, Signal], dict[str, Any], float]:
+    """Run (or load) the truth with scenario overrides ``truth_ov`` (its numerics included),
+    draw the trigger offset from ``rng`` and acquire the channels like a lab at class ``cfc``;
+    returns the recording, the run facts and the trigger offset."""
+    raw, info = run_dem(truth_ov, filtered=False, cache=cache)
+    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
+    acc, vel = raw["accel_z"], raw["velocity_z"]
+    rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
+                          float(-vel.data[0]), rng, trigger_offset=offset, cfc=cfc,
+                          source=f"crashdem DEM truth (seed {truth_ov['scenario.seed']}, radius "
+                                 f"{truth_ov['soil.radius']:g} m, safety "
+                                 f"{truth_ov['solver.safety']:g})"
+                                 + (f", CFC {cfc:g}" if cfc != 60.0 else ""))
+    meta = {"particles": info.get("particles"), "dt": info.get("dt"), "wall_s": info.get("wall_s")}
+    return rec, meta, offset
 
 
 #: filter classes a "different filter class" recording is drawn from [Hz] (the baseline: CFC 60)
@@ -323,20 +334,11 @@ def dem_filter_class_case(seed: int, *, declared: bool = False, cache: Path | No
     rng = np.random.default_rng(10_000 + int(seed))
     cfc = float(FILTER_CLASS_DRAWS[int(rng.integers(len(FILTER_CLASS_DRAWS)))])
     num = truth_numerics(rng, seed)
-    raw, info = run_dem(num, filtered=False, cache=cache)
-    offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
-    acc, vel = raw["accel_z"], raw["velocity_z"]
-    rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
-                          float(-vel.data[0]), rng, trigger_offset=offset, cfc=cfc,
-                          source=f"crashdem DEM truth (seed {num['scenario.seed']}, radius "
-                                 f"{num['soil.radius']:g} m, safety {num['solver.safety']:g}), "
-                                 f"CFC {cfc:g}")
+    rec, meta, offset = _acquired_truth(num, rng, cache, cfc)
     if not declared:
         rec = {k: Signal(s.name, s.t, s.data, s.unit, None, s.meta) for k, s in rec.items()}
     return DemConcealedCase("sensor_dynamics", {"filter_class": cfc}, {}, seed, rec, num, offset,
-                            {"particles": info.get("particles"), "dt": info.get("dt"),
-                             "wall_s": info.get("wall_s")}, {"filter_class": cfc},
-                            dem_baseline(cache))
+                            meta, {"filter_class": cfc}, dem_baseline(cache))
 
 
 def dem_baseline_raw(cache: Path | None = None) -> dict[str, Signal]:

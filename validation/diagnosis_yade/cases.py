@@ -199,18 +199,16 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
                                  {"source": "Yade 2023.02a output (raw)"}),
                "velocity_z": Signal("velocity_z", tu, np.interp(tu + t[0], t, vz), "m/s", None,
                                     {"source": "Yade 2023.02a output (raw)"})}
-        values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
-        return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
-                        {"grains": info["grains"], "dt": info["dt"], "radius": radius,
-                         "dt_factor": dt_factor, "trigger_offset_s": 0.0, "raw": True})
-    rec = acquire_samples(t_raw, {"accel_z": (acc, "m/s^2"), "velocity_z": (vz[sel], "m/s")},
-                          float(-vz[sel][0]), rng, trigger_offset=offset, cfc=cfc,
-                          t_end=float(scen["solver.t_end"]),
-                          source=f"Yade 2023.02a truth (seed {cfg['seed']}, radius {radius:g} m, "
-                                 f"dt {info['dt']:.3g} s)")
-    if not declare_cfc:
-        rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
+        offset = 0.0
+    else:
+        rec = acquire_samples(t_raw, {"accel_z": (acc, "m/s^2"), "velocity_z": (vz[sel], "m/s")},
+                              float(-vz[sel][0]), rng, trigger_offset=offset, cfc=cfc,
+                              t_end=float(scen["solver.t_end"]),
+                              source=f"Yade 2023.02a truth (seed {cfg['seed']}, radius "
+                                     f"{radius:g} m, dt {info['dt']:.3g} s)")
+        if not declare_cfc:
+            rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
     values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
-                     "dt_factor": dt_factor, "trigger_offset_s": offset})
+                     "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw})

@@ -66,22 +66,32 @@ def test_screen_then_confirm_counts_full_simulations(layering_case):
     assert TRUTH_DT < 2e-5  # the confirming numerics differ from the screening ROM
 
 
-def test_cli_diagnose_end_to_end(tmp_path):
-    """``crashdem diagnose`` on a CSV recording written by ``crashdem.recordings``."""
-    recordings = pytest.importorskip("crashdem.recordings")
-    cli = pytest.importorskip("crashdem.cli")
-    case = concealed_case(32, "structural_crush")
-    rec_path = tmp_path / "rec.csv"
-    recordings.write_recording(rec_path, case.recording)
+def _cli_rom_diagnose(tmp_path, rec_path, *extra: str) -> tuple[int, dict | None]:
+    """``crashdem diagnose --baseline rom`` of ``rec_path`` against ``SCENARIO_TOML``: the exit
+    code and ``report.json`` (None when nothing was written)."""
+    from crashdem import cli
+
     scen = tmp_path / "s.toml"
     scen.write_text(SCENARIO_TOML)
     out = tmp_path / "out"
-    assert cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
-                     "--out", str(out), "--baseline", "rom"]) == 0
-    d = json.loads((out / "report.json").read_text())
+    rc = cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
+                   "--out", str(out), "--baseline", "rom", *extra])
+    rep = out / "report.json"
+    return rc, (json.loads(rep.read_text()) if rc == 0 and rep.exists() else None)
+
+
+def test_cli_diagnose_end_to_end(tmp_path):
+    """``crashdem diagnose`` on a CSV recording written by ``crashdem.recordings``."""
+    recordings = pytest.importorskip("crashdem.recordings")
+    pytest.importorskip("crashdem.cli")
+    case = concealed_case(32, "structural_crush")
+    rec_path = tmp_path / "rec.csv"
+    recordings.write_recording(rec_path, case.recording)
+    rc, d = _cli_rom_diagnose(tmp_path, rec_path)
+    assert rc == 0
     assert d["missing_physics"] == "structural_crush"
     assert d["simulations"]["baseline_source"] == "rom"
-    assert (out / "overlay_accel_z.png").exists()
+    assert (tmp_path / "out" / "overlay_accel_z.png").exists()
 
 
 def test_cli_rom_baseline_filter_class(tmp_path):
@@ -90,18 +100,14 @@ def test_cli_rom_baseline_filter_class(tmp_path):
     simulated), named ``sensor_dynamics`` with the class."""
     from dataclasses import replace
 
-    from crashdem import cli, recordings
+    from crashdem import recordings
     from crashdem.diagnosis.generator import acquire
 
     rec = acquire(RomParams(), np.random.default_rng(12), cfc=180.0)
     rec_path = recordings.write_recording(tmp_path / "rec.csv",
                                           {k: replace(s, cfc=None) for k, s in rec.items()})
-    scen = tmp_path / "s.toml"
-    scen.write_text(SCENARIO_TOML)
-    out = tmp_path / "out"
-    assert cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
-                     "--out", str(out), "--baseline", "rom"]) == 0
-    d = json.loads((out / "report.json").read_text())
+    rc, d = _cli_rom_diagnose(tmp_path, rec_path)
+    assert rc == 0
     assert d["missing_physics"] == "sensor_dynamics", d["decision"]
     assert d["fit"]["filter_class"]["class"] == 180.0
     assert d["fit"]["filter_class"]["channels"]["accel_z"]["refilter"] == "from the raw channel"
@@ -110,7 +116,6 @@ def test_cli_rom_baseline_filter_class(tmp_path):
 def test_cli_units_given_on_the_command_line(tmp_path):
     """A plain CSV (header ``time,accel_z,velocity_z``, no units) diagnosed with ``--unit``;
     without it the error names the column and the option."""
-    from crashdem import cli
     from crashdem.diagnosis.generator import acquire
 
     rec = acquire(RomParams(speed_offset=-2.0), np.random.default_rng(13))
@@ -119,14 +124,9 @@ def test_cli_units_given_on_the_command_line(tmp_path):
                       for t, x, y in zip(a.t, a.data / 9.80665, v.data))
     path = tmp_path / "plain.csv"
     path.write_text("time,accel_z,velocity_z\n" + rows + "\n", encoding="utf-8")
-    scen = tmp_path / "s.toml"
-    scen.write_text(SCENARIO_TOML)
-    out = tmp_path / "out"
-    argv = ["diagnose", "--scenario", str(scen), "--recording", str(path), "--out", str(out),
-            "--baseline", "rom"]
-    assert cli.main(argv) != 0  # no units: refused with the column named
-    assert cli.main(argv + ["--unit", "accel_z=g", "--unit", "velocity_z=m/s"]) == 0
-    d = json.loads((out / "report.json").read_text())
+    assert _cli_rom_diagnose(tmp_path, path)[0] != 0  # no units: refused with the column named
+    rc, d = _cli_rom_diagnose(tmp_path, path, "--unit", "accel_z=g", "--unit", "velocity_z=m/s")
+    assert rc == 0
     assert d["missing_physics"] == "initial_conditions", d["decision"]
 
 
