@@ -37,6 +37,7 @@ from crashdem.diagnosis.fit import (ACCEPT_MARGIN, MIN_SCORE_GAIN, PRE_ONSET, WI
 from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align, estimate_noise,
                                          locate_mismatch, onset_time)
 from crashdem.diagnosis.rom import ACCEL, PENETRATION, VELOCITY, RomParams, RomSettings, RomSimulator
+from crashdem.diagnosis.rom_planar import PLANAR_CHANNELS, PlanarParams, PlanarSimulator
 from crashdem.diagnosis import _dsp
 from crashdem.diagnosis.filter_check import CLASSES as FILTER_CLASSES, filter_class_check
 from crashdem.diagnosis.sensor_check import accel_velocity_check
@@ -54,6 +55,10 @@ CONFIRM_MIN_GAIN = 0.02
 #: weighted residual RMS [sigma] left by the accepted effect above which combinations of two
 #: effects are tried (single-effect fits of the validation end below 3 sigma: model error)
 SECOND_STAGE_RMS = 4.0
+#: a second effect must leave at most this fraction of the first effect's residual RMS
+#: (measured: a true second effect (drop ROM truth, layering + floor) 0.09; nuisance pairs on
+#: glider truth with another nose radius and accelerometer position 0.66-0.96)
+SECOND_EFFECT_RMS_RATIO = 0.5
 #: how the baseline anchor indexes the discrepancy (baseline - calibrated screening model):
 #: "time" transfers it to a hypothesis at the same time; "depth" at the same tip depth of the
 #: screening model (``_depth_index``: the discrepancy of a granular bed belongs to its layers,
@@ -88,6 +93,8 @@ class Report:
     refitted: dict[str, Signal] = field(repr=False, default_factory=dict)
     fits: dict[str, FitResult] = field(repr=False, default_factory=dict)
     after_mismatch: list[MismatchWindow] = field(default_factory=list)
+    #: the hypothesis set of the screening model (drop or planar)
+    catalogue: catalogue.Catalogue = field(repr=False, default=catalogue.DROP)
 
     def to_dict(self) -> dict[str, Any]:
         """Everything ``report.json`` holds (signals excluded)."""
@@ -104,7 +111,9 @@ class Report:
             "fit": self.fit,
             "remaining_mismatch": [w.to_dict() for w in self.after_mismatch],
             "simulations": self.simulations,
-            "catalogue": [h.describe() for h in (RECALIBRATION, *CATALOGUE)],
+            "catalogue": self.catalogue.describe(),
+            "catalogue_model": self.catalogue.model,
+            "catalogue_not_represented": self.catalogue.excluded,
         }
 
 
@@ -535,7 +544,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
              calibrate_to_baseline: bool = True, anchor_to_baseline: bool = True,
              accept_margin: float = ACCEPT_MARGIN, anchor_index: str = ANCHOR_INDEX,
              impact_speed: float | None = None,
-             baseline_raw: Mapping[str, Signal] | None = None) -> Report:
+             baseline_raw: Mapping[str, Signal] | None = None,
+             catalog: catalogue.Catalogue | None = None) -> Report:
     """Locate the mismatch, fit every hypothesis, decide the missing physics.
 
     Parameters
@@ -547,7 +557,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     simulator : screening simulator ``f(params: dict) -> dict[str, Signal]`` taking the ROM
         parameter names of ``catalogue`` (default: ``rom.RomSimulator`` on ``rom_base`` with the
         recording's sample rate, CFC and span)
-    rom_base : baseline ROM parameters (default ``RomParams()``: the 850 kg sphere drop)
+    rom_base : baseline ROM parameters (default ``RomParams()``: the 850 kg sphere drop); a
+        ``rom_planar.PlanarParams`` screens with the planar (glider) model and its catalogue
+        (``catalogue.planar_catalogue``; channels ``accel_x``, ``accel_z``, ``pitch_rate``)
     hypotheses : catalogue names to try (default: all)
     noise : noise estimates per channel (default: estimated from the recording)
     calibrate_to_baseline : first refit the screening model's calibration to the baseline
@@ -571,6 +583,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     baseline_raw : the baseline's unfiltered channels (same names), used to re-filter the
         baseline when the recording was filtered with another CFC class (``filter_check``);
         without them only a lower class can be matched
+    catalog : the hypothesis set (default: the ``simulator``'s ``catalogue`` attribute, else
+        the drop catalogue, or ``catalogue.planar_catalogue(rom_base)`` for a planar
+        ``rom_base``)
 
     Returns
     -------
@@ -581,9 +596,17 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         raise ValueError(f"anchor_index={anchor_index!r}: must be 'time' or 'depth'")
     rec, resampled = _uniform(_si(recording_signals))
     base = _si(baseline_signals)
+    planar = simulator is None and isinstance(rom_base, PlanarParams)
+    if catalog is not None:
+        cat = catalog
+    elif simulator is not None:
+        cat = getattr(simulator, "catalogue", None) or catalogue.DROP
+    else:
+        cat = catalogue.planar_catalogue(rom_base) if planar else catalogue.DROP
     if channels is None:
-        channels = [c for c in ROM_CHANNELS if c in rec and c in base] if simulator is None else \
-            [c for c in rec if c in base]
+        model_channels = PLANAR_CHANNELS if planar else ROM_CHANNELS
+        channels = [c for c in model_channels if c in rec and c in base] if simulator is None \
+            else [c for c in rec if c in base]
     channels = list(channels)
     for ch in channels:
         if ch not in rec or ch not in base:
@@ -618,7 +641,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         windows += locate_mismatch(rec[ch], base_user[ch], noise[ch], shift=shift0)
     base_aligned = {ch: align(rec[ch], base_user[ch], shift0) for ch in channels}
     filter_found = bool(fclass["mismatch"]) and "sensor_dynamics" in (
-        list(hypotheses) if hypotheses is not None else list(catalogue.NAMES))
+        list(hypotheses) if hypotheses is not None else list(cat.names))
 
     rom_calls0 = 0
     if simulator is None:
@@ -626,7 +649,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         settings = RomSettings(t_pre=max(0.0, -float(rec[primary].t[0] - shift0)) + 0.005,
                                t_end=float(rec[primary].t[-1] - shift0) + 0.01,
                                sample_rate=fs, cfc=rec[primary].cfc)
-        simulator = RomSimulator(rom_base or RomParams(), settings)
+        simulator = PlanarSimulator(rom_base, settings, cat) if planar else \
+            RomSimulator(rom_base or RomParams(), settings)
     base_values: dict[str, float] = {}
     disc: dict[str, Signal] = {}
     depth_cal: Signal | None = None
@@ -686,7 +710,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
                                for ch in channels])
     base_rms = float(np.sqrt(np.mean(base_res**2)))
 
-    names = list(hypotheses) if hypotheses is not None else list(catalogue.NAMES)
+    names = list(hypotheses) if hypotheses is not None else list(cat.names)
     # model-free sensor check: the accelerometer against the measured velocity's derivative
     check: dict[str, Any] = {"applicable": False, "reason": "needs accel_z and velocity_z"}
     if ACCEL in channels and VELOCITY in channels:
@@ -714,7 +738,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     recal = fit_hypothesis(problem, RECALIBRATION, grid_points=1, n_starts=1)
     fits[RECALIBRATION.name] = recal
     for name in names:
-        h = catalogue.get(name)
+        h = cat.get(name)
         if name == "sensor_dynamics" and sensor_found:
             fits[name] = _fit_checked_sensor(problem, h, check, recal)
         elif name == "initial_conditions" and speed is not None and speed["used"]:
@@ -792,21 +816,36 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         missing, best_name, chosen = None, RECALIBRATION.name, recal
 
     # second stage: a large unexplained residual after the accepted effect -> try it combined
-    # with each other effect (greedy forward selection, same nested-BIC rule)
+    # with each other effect (greedy forward selection, same nested-BIC rule). A pair is a
+    # candidate only when its added effect is switched on (not at its "off" values: that is the
+    # single effect with a nuisance tweak, e.g. a wall 1 cm nearer for a 1 cm larger nose) and
+    # explains most of what the first effect leaves (residual RMS at most SECOND_EFFECT_RMS_RATIO
+    # of it): a model-form difference buys smaller gains from any flexible extra term
+    second_stage: list[dict[str, Any]] = []
     if missing is not None and chosen is not None and chosen.rms_sigma > SECOND_STAGE_RMS and \
             hypotheses is None:
         combos = []
-        for name in catalogue.NAMES:
+        for name in cat.names:
             if name == missing:
                 continue
-            h2 = catalogue.combine(missing, name)
+            h2 = cat.combine(missing, name)
             r2 = fit_variants(problem, h2, start=chosen.parameters,
-                              grid_over=[p.name for p in catalogue.get(name).parameters],
+                              grid_over=[p.name for p in cat.get(name).parameters],
                               n_starts=3, n_full=3)
+            ratio = r2.rms_sigma / chosen.rms_sigma if chosen.rms_sigma > 0 else 1.0
+            row = {"name": h2.name, "delta_bic": chosen.bic - r2.bic, "rms_ratio": ratio}
+            if _left_off(cat.get(name), r2.parameters):
+                row["rejected"] = f"{name} stays at its off values"
+            elif ratio > SECOND_EFFECT_RMS_RATIO:
+                row["rejected"] = (f"explains too little of the residual (RMS ratio {ratio:.2f} > "
+                                   f"{SECOND_EFFECT_RMS_RATIO:g})")
+            second_stage.append(row)
+            if "rejected" in row:
+                continue
             fits[h2.name] = r2
             combos.append(r2)
-        best2 = min(combos, key=lambda r: r.bic)
-        if chosen.bic - best2.bic > accept_margin:
+        best2 = min(combos, key=lambda r: r.bic) if combos else None
+        if best2 is not None and chosen.bic - best2.bic > accept_margin:
             decision += (f"; the residual left ({chosen.rms_sigma:.1f} sigma RMS) is explained "
                          f"further by {best2.hypothesis} (Delta BIC = {chosen.bic - best2.bic:.1f})")
             missing, best_name, chosen = best2.hypothesis, best2.hypothesis, best2
@@ -818,7 +857,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             after += locate_mismatch(rec[ch], chosen.aligned[ch], noise[ch], shift=0.0)
     hyp_out = []
     for r in ranked:
-        h = catalogue.get(r.hypothesis)
+        h = cat.get(r.hypothesis)
         after_r = []
         for ch in channels:
             after_r += locate_mismatch(rec[ch], r.aligned[ch], noise[ch], shift=0.0)
@@ -875,6 +914,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "filter_class": fclass,
         "sign_convention": signs,
         "resampled": resampled,
+        "second_stage": second_stage,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
     # filtered noise, or far above it, is model-form error the catalogue does not cover
@@ -898,7 +938,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             "full_simulations": 0,
             "wall_time_s": time.perf_counter() - t_start}
     return Report(channels, noise, windows, hyp_out, missing, best_name, fit_out, sims, decision,
-                  rec, base_aligned, refitted, fits, after)
+                  rec, base_aligned, refitted, fits, after, cat)
 
 
 def screen_then_confirm(baseline_signals: Mapping[str, Signal],
@@ -957,7 +997,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         # factors do not carry over to the full model's material parameters (measured on the
         # DEM: every full run with the mapped factors scored below the baseline), while the
         # effect parameters (depths, speeds, frequencies) have the same meaning in both
-        requests.append((h["name"], _confirmation_overrides(h)))
+        requests.append((h["name"], _confirmation_overrides(h, rep.catalogue)))
     fclass = rep.fit.get("filter_class") or {}
     if fclass.get("mismatch") and fclass.get("class") is not None:
         # every full run is filtered at the recording's class (instrumentation.cfc), as the
@@ -1008,7 +1048,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             # a candidate run carries the effect parameters (the reference may be the
             # recalibrated run with its own parameters)
             r["delta_bic_vs_reference"] = ref_bic - bic(
-                r, len(catalogue.get(r["hypothesis"]).parameters))
+                r, len(rep.catalogue.get(r["hypothesis"]).parameters))
     cands = [r for r in rows[1:] if "rss" in r]
 
     def decisive(r):  # the full run beats the reference in both likelihood and score
@@ -1022,9 +1062,13 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     checked = (rep.missing_physics == "sensor_dynamics"
                and (bool(rep.fit.get("sensor_check", {}).get("detected"))
                     or bool(fclass.get("mismatch"))))
-    if screened is not None and (checked or screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN):
+    if screened is not None and (checked or (
+            screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN
+            and screened["score"] >= reference - CONFIRM_MIN_GAIN)):
         # the screening's claim stands unless its full run is decisively worse than the
-        # reference or another candidate's full run is decisively better than it
+        # reference (in likelihood, or by CONFIRM_MIN_GAIN in score: a full run that fits
+        # the recording worse by the field's objective rating does not confirm anything) or
+        # another candidate's full run is decisively better than it
         confirmed, best = screened["hypothesis"], screened
     rivals = [] if checked else [r for r in cands if r is not screened and decisive(r)]
     if rivals:
@@ -1049,17 +1093,30 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     return rep
 
 
-def _confirmation_overrides(h: dict[str, Any]) -> dict[str, Any]:
+#: a parameter within this fraction of its search range of its "off" value leaves the effect off
+OFF_TOLERANCE = 0.02
+
+
+def _left_off(h: Hypothesis, values: Mapping[str, float]) -> bool:
+    """True when every parameter of ``h`` that has an ``off`` value is within
+    ``OFF_TOLERANCE`` of it (in the unit-box search coordinate) and at least one has one."""
+    specs = [p for p in h.parameters if p.off is not None and p.name in values]
+    return bool(specs) and all(abs(p.to_unit(values[p.name]) - p.to_unit(p.off)) < OFF_TOLERANCE
+                               for p in specs)
+
+
+def _confirmation_overrides(h: dict[str, Any],
+                            cat: catalogue.Catalogue = catalogue.DROP) -> dict[str, Any]:
     """Scenario overrides of a candidate's full run: its screened parameters, except where
     the screening left the effect switched off (a parameter at its ``off`` value, i.e. the
     screening model could not see the effect): there the catalogue's nominal value is used."""
     if h.get("variant") == FILTER_CLASS_VARIANT:
         return {"instrumentation.cfc": float(h["parameters"]["filter_class"])}
-    hyp = catalogue.get(h["name"])
+    hyp = cat.get(h["name"])
     vals = dict(h["parameters"])
     for p in hyp.parameters:
         if p.off is not None and p.name in vals and \
-                abs(p.to_unit(vals[p.name]) - p.to_unit(p.off)) < 0.02:
+                abs(p.to_unit(vals[p.name]) - p.to_unit(p.off)) < OFF_TOLERANCE:
             vals[p.name] = p.nominal
     return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
 

@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any, Callable
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
+           "Catalogue", "DROP", "planar_catalogue",
            "friction_ratio_from_rolling", "rolling_from_friction_ratio"]
 
 #: friction ratio with free rotation and no rolling resistance (mu_r = 0) [-] (ROM assumption)
@@ -312,50 +313,166 @@ CATALOGUE: tuple[Hypothesis, ...] = (
     ),
 )
 
-NAMES: tuple[str, ...] = tuple(h.name for h in CATALOGUE)
+class Catalogue:
+    """A set of candidate hypotheses for one screening model (names from issue 7).
+
+    ``model`` names the screening model whose parameter names the entries use (``"drop"``:
+    ``rom.RomParams``; ``"planar"``: ``rom_planar.PlanarParams`` and its soil record).
+    ``excluded`` maps catalogue names the model does not represent to the reason (reported)."""
+
+    def __init__(self, entries: tuple[Hypothesis, ...], model: str,
+                 excluded: dict[str, str] | None = None):
+        self.entries = tuple(entries)
+        self.model = model
+        self.excluded = dict(excluded or {})
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """Names of the entries, in catalogue order."""
+        return tuple(h.name for h in self.entries)
+
+    def get(self, name: str) -> Hypothesis:
+        """The entry (or the recalibration pseudo-hypothesis) called ``name``; ``"a+b"`` is the
+        combination of entries a and b (``combine``)."""
+        if name == RECALIBRATION.name:
+            return RECALIBRATION
+        if "+" in name:
+            return self.combine(*name.split("+"))
+        for h in self.entries:
+            if h.name == name:
+                return h
+        if name in self.excluded:
+            raise ValueError(f"hypothesis {name!r}: not represented by the {self.model} model "
+                             f"({self.excluded[name]})")
+        import difflib
+
+        known = [*self.names, RECALIBRATION.name]
+        close = difflib.get_close_matches(name, known, n=3)
+        raise ValueError(f"hypothesis {name!r}: unknown; known: {known}"
+                         + (f"; did you mean {close}?" if close else ""))
+
+    def combine(self, *names: str) -> Hypothesis:
+        """Several entries switched on together (name ``"a+b"``)."""
+        hs = [self.get(n) for n in names]
+        params: list[ParameterSpec] = []
+        for h in hs:
+            params += [p for p in h.parameters if p.name not in {q.name for q in params}]
+
+        def to_scen(v: dict[str, float]) -> dict[str, Any]:
+            out: dict[str, Any] = {}
+            for h in hs:
+                out.update(h.scenario_overrides(v))
+            return out
+
+        # discrete forms: the product of the parts' variants (labels joined by "+")
+        variants: tuple[Variant, ...] = ()
+        for h in hs:
+            if not h.variants:
+                continue
+            if not variants:
+                variants = h.variants
+            else:
+                variants = tuple(Variant(f"{a.label}+{b.label}", {**a.rom_values, **b.rom_values},
+                                         {**a.scenario, **b.scenario}) for a in variants
+                                 for b in h.variants)
+        return Hypothesis("+".join(names), " AND ".join(h.physics for h in hs), tuple(params),
+                          None, tuple(sig for h in hs for sig in h.signature),
+                          to_scenario=to_scen, variants=variants)
+
+    def describe(self) -> list[dict[str, Any]]:
+        """JSON-ready descriptions of the recalibration and every entry."""
+        return [h.describe() for h in (RECALIBRATION, *self.entries)]
+
+
+#: the drop-test catalogue (``rom.RomParams`` parameter names)
+DROP = Catalogue(CATALOGUE, "drop")
+NAMES: tuple[str, ...] = DROP.names
 
 
 def combine(*names: str) -> Hypothesis:
-    """Several catalogue effects switched on together (name ``"a+b"``)."""
-    hs = [get(n) for n in names]
-    params: list[ParameterSpec] = []
-    for h in hs:
-        params += [p for p in h.parameters if p.name not in {q.name for q in params}]
-
-    def to_scen(v: dict[str, float]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        for h in hs:
-            out.update(h.scenario_overrides(v))
-        return out
-
-    # discrete forms: the product of the parts' variants (labels joined by "+")
-    variants: tuple[Variant, ...] = ()
-    for h in hs:
-        if not h.variants:
-            continue
-        if not variants:
-            variants = h.variants
-        else:
-            variants = tuple(Variant(f"{a.label}+{b.label}", {**a.rom_values, **b.rom_values},
-                                     {**a.scenario, **b.scenario}) for a in variants
-                             for b in h.variants)
-    return Hypothesis("+".join(names), " AND ".join(h.physics for h in hs), tuple(params), None,
-                      tuple(sig for h in hs for sig in h.signature), to_scenario=to_scen,
-                      variants=variants)
+    """Several drop-catalogue effects switched on together (name ``"a+b"``)."""
+    return DROP.combine(*names)
 
 
 def get(name: str) -> Hypothesis:
-    """The catalogue entry (or the recalibration pseudo-hypothesis) called ``name``; ``"a+b"``
-    is the combination of entries a and b (``combine``)."""
-    if name == RECALIBRATION.name:
-        return RECALIBRATION
-    if "+" in name:
-        return combine(*name.split("+"))
-    for h in CATALOGUE:
-        if h.name == name:
-            return h
-    import difflib
+    """The drop-catalogue entry (or the recalibration pseudo-hypothesis) called ``name``;
+    ``"a+b"`` is the combination of entries a and b (``combine``)."""
+    return DROP.get(name)
 
-    close = difflib.get_close_matches(name, [*NAMES, RECALIBRATION.name], n=3)
-    raise ValueError(f"hypothesis {name!r}: unknown; known: {[*NAMES, RECALIBRATION.name]}"
-                     + (f"; did you mean {close}?" if close else ""))
+
+def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogue:
+    """The catalogue of the planar (glider) screening model ``rom_planar.PlanarParams``.
+
+    Same entries and parameters as the drop catalogue for the soil, sensor and crush physics;
+    ``boundary_proximity`` is the container's rear wall (its horizontal distance ahead of the
+    first contact point and its stiffness; ``off`` = the baseline's wall) and
+    ``initial_conditions`` adds the flight-path angle and pitch attitude offsets.
+    ``soil_layering`` is not represented: the container's layers are horizontal, the planar
+    model's interface runs parallel to the slope face, and the scenario's one interface is
+    already in use (the compacted lower part).
+
+    geometry : scenario facts for the scenario mapping (``crashdem.diagnosis.cli``):
+        ``impact_height`` [m], ``slope`` [rad] (container length from the wall distance) and
+        ``wall_young`` [Pa] (the panel modulus that gives the baseline's ``wall_stiffness``).
+        Without them the two wall parameters have no scenario key.
+    """
+    geo = dict(geometry or {})
+    d0 = float(base.wall_distance) if math.isfinite(base.wall_distance) else 4.0
+    k0 = float(base.wall_stiffness)
+    # the wall's basin is narrow (the second peak's timing): 24 grid levels over at most
+    # 1.25 x the modelled distance
+    d_hi = max(2.0, 1.25 * d0)
+
+    def wall_to_scen(v: dict[str, float]) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if "impact_height" in geo and "slope" in geo and "wall_distance" in v:
+            out["container.length"] = float(v["wall_distance"]) + \
+                geo["impact_height"] / math.tan(geo["slope"])
+        if "wall_young" in geo and "wall_stiffness" in v:
+            out["container.wall_young"] = geo["wall_young"] * float(v["wall_stiffness"]) / k0
+        return out
+
+    def ic_to_scen(v: dict[str, float]) -> dict[str, Any]:
+        return {"physics.initial_conditions.velocity_offset": float(v.get("speed_offset", 0.0)),
+                "physics.initial_conditions.angle_offset_deg":
+                    math.degrees(float(v.get("angle_offset", 0.0))),
+                "physics.initial_conditions.pitch_offset_deg":
+                    math.degrees(float(v.get("pitch_offset", 0.0)))}
+
+    entries = []
+    for h in CATALOGUE:
+        if h.name == "soil_layering":
+            continue
+        if h.name == "boundary_proximity":
+            h = Hypothesis(
+                "boundary_proximity",
+                ("The container's rear wall nearer than modelled or of another compliance: the "
+                 "nose reaches it and a second longitudinal peak appears (thesis section 2.4); "
+                 "penalty contact of the nose on a vertical wall."),
+                (ParameterSpec("wall_distance", "m", 0.2, d_hi, min(d0, 0.75 * d0), "lin",
+                               "horizontal distance from the first contact point to the rear "
+                               "wall", None, off=min(d0, d_hi), grid=24),
+                 ParameterSpec("wall_stiffness", "N/m", k0 / 30.0, k0 * 30.0, k0, "log",
+                               "rear-wall stiffness at the nose (panel generalised stiffness)",
+                               None, off=k0, grid=3)),
+                "physics.boundary_proximity.enabled",
+                ("missing_peak", "extra_peak", "peak_early"),
+                to_scenario=wall_to_scen)
+        elif h.name == "initial_conditions":
+            h = Hypothesis(
+                "initial_conditions",
+                ("The impact differed from the modelled one: an offset of the impact speed, of "
+                 "the flight-path angle or of the pitch attitude at contact."),
+                (h.parameters[0],
+                 ParameterSpec("angle_offset", "rad", -0.3, 0.3, 0.0, "lin",
+                               "added to the flight-path angle below horizontal",
+                               None, off=0.0),
+                 ParameterSpec("pitch_offset", "rad", -0.3, 0.3, 0.0, "lin",
+                               "added to the pitch attitude (nose up positive)", None, off=0.0)),
+                "physics.initial_conditions.enabled",
+                ("initial_offset", "peak_too_high", "peak_too_low", "peak_early", "peak_late"),
+                to_scenario=ic_to_scen)
+        entries.append(h)
+    return Catalogue(tuple(entries), "planar",
+                     {"soil_layering": "the container's layers are horizontal, the planar "
+                                       "model's interface is parallel to the slope face"})

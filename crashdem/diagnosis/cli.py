@@ -11,20 +11,27 @@ processes, or the cluster at ``--scheduler ADDRESS``; runs gathered in ``DIR/con
 ``--workers 0`` runs them one after the other in this process.
 
 A recorded channel is matched to a ROM channel (``accel_z``: specific force along +z of the
-impactor [m/s^2]; ``velocity_z`` [m/s]) by name, or explicitly with ``NAME:accel_z``.
+impactor [m/s^2]; ``velocity_z`` [m/s]) by name, or explicitly with ``NAME:accel_z``. A
+``glider_crash`` scenario is screened with the planar model (``planar_from_scenario``) on
+``accel_x`` / ``accel_z`` / ``pitch_rate`` (the glider's ``rear_accel_x`` / ``rear_accel_z`` /
+``pitch_rate``) with the planar catalogue (``catalogue.planar_catalogue``).
 """
 from __future__ import annotations
 
 import argparse
 import math
+
+import numpy as np
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 from crashdem.diagnosis.rom import ACCEL, VELOCITY, RomParams, RomSettings, simulate
+from crashdem.diagnosis.rom_planar import PLANAR_CHANNELS, PlanarParams, simulate_planar
 from crashdem.signal import Signal
 
-__all__ = ["diagnose_command", "rom_from_scenario", "DROP_SPHERE_RADIUS", "DROP_SPHERE_MASS"]
+__all__ = ["diagnose_command", "rom_from_scenario", "planar_from_scenario", "planar_geometry",
+           "DROP_SPHERE_RADIUS", "DROP_SPHERE_MASS"]
 
 #: the PoliMi drop mass (anchors.md section 1.1, architecture: bodies.drop_sphere)
 DROP_SPHERE_MASS = 850.0
@@ -35,15 +42,20 @@ def rom_from_scenario(scen) -> RomParams:
     """ROM parameters of a ``drop_test`` scenario (impactor, impact speed, soil depth and every
     enabled ``physics.*`` switch that the ROM represents).
 
+    A ``glider_crash`` scenario gives the planar model (``planar_from_scenario``).
+
     Raises
     ------
-    ValueError for scenario kinds the ROM does not represent yet (the planar glider impactor).
+    ValueError for scenario kinds no screening model represents.
     """
+    if scen.get("scenario.kind") == "glider_crash" and scen.get("impactor.body") == "glider":
+        return planar_from_scenario(scen)
     if scen.get("scenario.kind") != "drop_test" or scen.get("impactor.body") != "drop_sphere":
-        raise ValueError("diagnose: the reduced-order model covers the sphere drop test only "
-                         f"(scenario.kind={scen.get('scenario.kind')!r}, "
-                         f"impactor.body={scen.get('impactor.body')!r}); the planar glider ROM "
-                         "is not implemented yet")
+        raise ValueError("diagnose: the reduced-order models cover the sphere drop test "
+                         "(scenario.kind='drop_test', impactor.body='drop_sphere') and the glider "
+                         "crash ('glider_crash', 'glider'); got "
+                         f"scenario.kind={scen.get('scenario.kind')!r}, "
+                         f"impactor.body={scen.get('impactor.body')!r}")
     mass = scen.get("impactor.mass") or DROP_SPHERE_MASS
     v = scen.get("impactor.impact_velocity")
     if v is None:
@@ -56,6 +68,15 @@ def rom_from_scenario(scen) -> RomParams:
         vals["strength_ratio"] = g("soil_layering.lower_young_factor")
     if g("boundary_proximity.enabled") and g("boundary_proximity.floor_depth") is not None:
         vals["floor_depth"] = g("boundary_proximity.floor_depth")
+    vals.update(_physics_values(scen))
+    return RomParams(**vals)
+
+
+def _physics_values(scen) -> dict[str, Any]:
+    """ROM soil-record fields of the enabled ``physics.*`` switches shared by the drop and the
+    planar model (cohesion, rotation, damping, sensor, crush, impact-speed offset)."""
+    vals: dict[str, Any] = {}
+    g = lambda k: scen.get(f"physics.{k}")  # noqa: E731
     if g("cohesion.enabled"):
         vals["cohesion"] = g("cohesion.normal_strength")
     if g("particle_rotation.enabled"):
@@ -73,7 +94,84 @@ def rom_from_scenario(scen) -> RomParams:
         vals["crush_stroke"] = g("structural_crush.stroke")
     if g("initial_conditions.enabled"):
         vals["speed_offset"] = g("initial_conditions.velocity_offset")
-    return RomParams(**vals)
+    return vals
+
+
+def planar_from_scenario(scen) -> PlanarParams:
+    """Planar-model parameters of a ``glider_crash`` scenario, with the facts of the full model
+    (``crashdem.glider``): the fuselage's mass and pitch inertia (``glider_spec``), its first
+    contact point on the slope (the support vertex along the slope's inward normal at the
+    contact attitude) as the lowest point of a nose sphere of the fuselage's half width, the
+    rear accelerometer's position, the path angle and attitude after the free flight, the
+    skin friction, the rear wall's distance ahead of the contact point and its plate stiffness
+    (``glider.wall_panels``), and the enabled ``physics.*`` switches the model represents.
+
+    The soil law's constants are the drop model's defaults (bulk density from the grains and
+    the packing porosity): the screening model is calibrated to the baseline run before any
+    fit. The horizontal compaction layers are not represented (the impact point lies in the
+    compacted part, thesis section 2.4); ``soil_layering`` is not in the planar catalogue.
+    """
+    import numpy as np
+
+    from crashdem.glider import _support_vertex, glider_spec, pitch_rotation, wall_panels
+
+    spec = glider_spec(scen)
+    gl = scen.get("glider")
+    alpha = math.radians(scen.get("container.slope_deg"))
+    speed, path, pitch = gl["release_speed"], scen.get("impactor.angle_deg"), \
+        scen.get("impactor.pitch_deg")
+    if scen.get("physics.initial_conditions.enabled"):
+        path += scen.get("physics.initial_conditions.angle_offset_deg")
+        pitch += scen.get("physics.initial_conditions.pitch_offset_deg")
+    t_ff = gl["free_flight_time"]
+    a = math.radians(path)
+    vx, vz = speed * math.cos(a), -speed * math.sin(a) - 9.81 * t_ff
+    theta = math.radians(pitch) + math.radians(gl["release_pitch_rate_deg_s"]) * t_ff
+    rot = pitch_rotation(theta)
+    n_out = np.array([-math.sin(alpha), 0.0, math.cos(alpha)])
+    r_sup = _support_vertex(spec.vertices, rot, -n_out)  # world offset from the CG
+    rn = 0.5 * float(spec.reference_dimensions["width"])
+    centre_body = rot.T @ (r_sup + rn * n_out)
+    mount = next(m.position for m in spec.sensors if m.name == "rear_accel_x")
+    # rear wall: horizontal distance from the first contact point to the wall face, less the
+    # nose tip's lead over the nose sphere's front at the contact attitude
+    length = scen.get("container.length")
+    h_imp = gl["impact_height"]
+    tip_x = float(np.max((np.asarray(spec.vertices) @ rot.T)[:, 0]))
+    sphere_front = float(r_sup[0] + rn * n_out[0]) + rn
+    wall = length - h_imp / math.tan(alpha) - (tip_x - sphere_front)
+    panel = wall_panels(scen)["rear_wall"]
+    porosity = scen.get("physics.soil_layering.lower_porosity") if \
+        scen.get("physics.soil_layering.enabled") else None
+    density = scen.get("soil.material.density") * (1.0 - (porosity or 0.38))
+    soil_vals: dict[str, Any] = {"mass": float(spec.mass), "radius": rn,
+                                 "impact_speed": math.hypot(vx, vz), "density": density,
+                                 "floor_depth": h_imp / math.cos(alpha)}
+    # the crushable nose of the full model (glider.NOSE_CUT_STATION; physics.structural_crush)
+    import bodies
+
+    from crashdem.glider import NOSE_CUT_STATION
+
+    _, nose = bodies.split_nose(spec, NOSE_CUT_STATION, bodies.GliderBuildUp().laminate_areal_density)
+    soil_vals["nose_mass_fraction"] = float(nose.mass) / float(spec.mass)
+    soil_vals.update(_physics_values(scen))
+    mu = math.tan(math.radians(min(gl["skin_friction_deg"],
+                                   scen.get("soil.material.friction_angle_deg"))))
+    return PlanarParams(soil=RomParams(**soil_vals), pitch_inertia=float(spec.inertia[1, 1]),
+                        nose_offset=float(centre_body[0]), nose_height=float(centre_body[2]),
+                        slope=alpha, path_angle=math.atan2(-vz, vx), pitch=theta, friction=mu,
+                        wall_distance=max(0.05, wall), wall_stiffness=float(panel.stiffness),
+                        mount_x=float(mount[0]), mount_z=float(mount[2]))
+
+
+def planar_geometry(scen) -> dict[str, float]:
+    """Scenario facts that map the planar catalogue's wall parameters to scenario keys
+    (``catalogue.planar_catalogue``)."""
+    from crashdem.run import PLYWOOD_YOUNG
+
+    return {"impact_height": scen.get("glider.impact_height"),
+            "slope": math.radians(scen.get("container.slope_deg")),
+            "wall_young": scen.get("container.wall_young") or PLYWOOD_YOUNG}
 
 
 def _si_unit(unit: str | None) -> str | None:
@@ -88,8 +186,8 @@ def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
     (dimension ``AC``/``VE``, direction ``Z``), or the one channel with the right SI unit whose
     name says z. None when nothing or more than one channel qualifies."""
     si, iso = ("m/s^2", "AC") if model == ACCEL else ("m/s", "VE")
-    alt = SIM_CHANNELS.get(model)
-    if alt in rec:
+    alt = sim_channel(rec, model)
+    if alt is not None:
         return alt
     iso_hits = [n for n in rec if len(n) == 16 and n[12:14].upper() == iso
                 and n[14].upper() == "Z"]
@@ -102,13 +200,27 @@ def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
     return z_hits[0] if len(z_hits) == 1 else None
 
 
-def _channel_map(specs: list[str] | None, rec: dict[str, Signal]) -> dict[str, str]:
+def _channel_map(specs: list[str] | None, rec: dict[str, Signal],
+                 planar: bool = False) -> dict[str, str]:
     """recorded name -> ROM channel name.
 
-    Without ``--channel``: the channels named ``accel_z`` / ``velocity_z``; else, for each of
-    the two, crashdem's impactor channel, a unique ISO-MME code or a unique channel with the
-    right unit (see ``_auto_channel``)."""
+    Drop test: without ``--channel``, the channels named ``accel_z`` / ``velocity_z``; else, for
+    each of the two, crashdem's impactor channel, a unique ISO-MME code or a unique channel
+    with the right unit (see ``_auto_channel``). Glider (``planar``): the channels named
+    ``accel_x`` / ``accel_z`` / ``pitch_rate``, else the glider's ``rear_accel_x`` /
+    ``rear_accel_z`` / ``pitch_rate``; other names need ``--channel NAME:accel_x``."""
     out: dict[str, str] = {}
+    models = PLANAR_CHANNELS if planar else (ACCEL, VELOCITY)
+    if not specs and planar:
+        for model in PLANAR_CHANNELS:
+            name = model if model in rec else sim_channel(rec, model)
+            if name is not None and name not in out:
+                out[name] = model
+        if "accel_x" not in out.values():
+            raise ValueError(f"diagnose: no recorded channel found for 'accel_x' (the glider's "
+                             f"longitudinal acceleration; also looked for 'rear_accel_x'); "
+                             f"recorded: {sorted(rec)}; map one with --channel NAME:accel_x")
+        return out
     if not specs:
         for model in (ACCEL, VELOCITY):
             name = model if model in rec else _auto_channel(rec, model)
@@ -125,8 +237,9 @@ def _channel_map(specs: list[str] | None, rec: dict[str, Signal]) -> dict[str, s
         rom_name = rom_name or name
         if name not in rec:
             raise ValueError(f"--channel {spec!r}: {name!r} not in the recording ({sorted(rec)})")
-        if rom_name not in (ACCEL, VELOCITY):
-            raise ValueError(f"--channel {spec!r}: model channel {rom_name!r} must be {ACCEL!r} or {VELOCITY!r}")
+        if rom_name not in models:
+            raise ValueError(f"--channel {spec!r}: model channel {rom_name!r} must be one of "
+                             f"{list(models)}")
         out[name] = rom_name
     return out
 
@@ -146,14 +259,21 @@ def diagnose_command(args: argparse.Namespace) -> int:
             raise ValueError(f"--unit {spec!r}: must be NAME=UNIT, e.g. accel_z=g")
         units[name.strip()] = unit.strip()
     raw = read_recording(args.recording, units=units or None)
-    cmap = _channel_map(getattr(args, "channel", None), raw)
+    base_params = rom_from_scenario(scen)
+    planar = isinstance(base_params, PlanarParams)
+    cmap = _channel_map(getattr(args, "channel", None), raw, planar)
     rec = {rom_name: Signal(rom_name, raw[name].t, raw[name].data, raw[name].unit, raw[name].cfc,
                             {**raw[name].meta, "recorded_name": name})
            for name, rom_name in cmap.items()}
-    # primary channel first (acceleration when present)
-    rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != ACCEL))
+    # primary channel first (the longitudinal acceleration of the glider, the drop's vertical)
+    primary = "accel_x" if planar else ACCEL
+    rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != primary))
     first = next(iter(rec.values()))
-    base_params = rom_from_scenario(scen)
+    cat_kw: dict[str, Any] = {}
+    if planar:
+        from crashdem.diagnosis.catalogue import planar_catalogue
+
+        cat_kw["catalog"] = planar_catalogue(base_params, planar_geometry(scen))
     settings = RomSettings(t_pre=max(0.0, -float(first.t[0])) + 0.005,
                            t_end=float(first.t[-1]) + 0.01, sample_rate=first.fs,
                            cfc=first.cfc if first.cfc is not None else scen.get("instrumentation.cfc"))
@@ -161,7 +281,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
                                  mode=getattr(args, "baseline", None) or "run",
                                  out_dir=Path(args.out))
     # unfiltered baseline channels, to compare at a recording's other filter class
-    base_raw = (simulate(base_params, replace(settings, cfc=None)) if source == "rom"
+    base_raw = (_simulate(base_params, replace(settings, cfc=None)) if source == "rom"
                 else _baseline_raw(source, cmap))
     n_full = getattr(args, "full_confirm", None)
     if n_full is None:
@@ -175,7 +295,6 @@ def diagnose_command(args: argparse.Namespace) -> int:
         dask = getattr(args, "workers", None) != 0
         _share_packings(source, [Path(args.out) / ("confirmation.h5.members" if dask
                                                    else "full_runs")])
-        from crashdem.recordings import read_recording as _read
         from crashdem.run import run_scenario
 
         def full(ov: dict[str, Any]) -> dict[str, Signal]:
@@ -183,8 +302,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
             keys = {k: v for k, v in ov.items() if not k.startswith("calibration.")}
             s2 = scen.with_overrides(_apply_scales(scen, scale_keys) | keys)
             path = run_scenario(s2, out_dir=Path(args.out) / "full_runs", progress=False)
-            res = _read(path)
-            got = {rom_name: _pick(res, name, rom_name) for name, rom_name in cmap.items()}
+            got = _result_channels(path, cmap)
             return {k: v for k, v in got.items() if v is not None}
 
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
@@ -195,12 +313,12 @@ def diagnose_command(args: argparse.Namespace) -> int:
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
-                                  baseline_raw=base_raw)
+                                  baseline_raw=base_raw, **cat_kw)
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
     else:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
-                       baseline_raw=base_raw)
+                       baseline_raw=base_raw, **cat_kw)
     rep.simulations["baseline_source"] = source
     paths = write_report(rep, args.out)
     print(paths["json"])
@@ -269,20 +387,27 @@ def _share_packings(source: str, run_dirs: list[Path]) -> None:
             pass
 
 
-#: simulation channel that stands for each model channel when the recording's names differ
-SIM_CHANNELS = {ACCEL: "drop_mass_accel_z", VELOCITY: "drop_mass_velocity_z"}
+#: simulation channels that stand for each model channel when the recording's names differ
+#: (drop mass first, then the glider's rear accelerometer pair and gyro; a result holds one)
+SIM_CHANNELS: dict[str, tuple[str, ...]] = {
+    ACCEL: ("drop_mass_accel_z", "rear_accel_z"), VELOCITY: ("drop_mass_velocity_z",),
+    "accel_x": ("rear_accel_x",), "pitch_rate": ("pitch_rate",)}
 
 
-def _pick(res, name: str, rom_name: str):
-    """The simulated channel for a recorded ``name`` (same name first, then the impactor's
-    channel standing for ``rom_name``), or None."""
-    if name in res:
-        return res[name]
-    alt = SIM_CHANNELS.get(rom_name)
-    return res[alt] if alt is not None and alt in res else None
+def sim_channel(names, rom_name: str) -> str | None:
+    """The first simulation channel among ``names`` standing for ``rom_name``, or None."""
+    return next((n for n in SIM_CHANNELS.get(rom_name, ()) if n in names), None)
 
 
-def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSettings,
+def _simulate(params: RomParams | PlanarParams, settings: RomSettings) -> dict[str, Signal]:
+    """The screening model's channels (drop or planar)."""
+    if isinstance(params, PlanarParams):
+        return simulate_planar(params, settings)
+    return simulate(params, settings)
+
+
+def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
+              settings: RomSettings,
               mode: str = "run", out_dir: Path | None = None
               ) -> tuple[dict[str, Signal], str]:
     """The baseline simulation the recording is compared with.
@@ -300,13 +425,11 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSe
     if mode not in ("run", "result", "rom"):
         raise ValueError(f"--baseline={mode!r}: must be one of 'run', 'result', 'rom'")
     if mode == "rom":
-        return simulate(rom_params, settings), "rom"
-    from crashdem.recordings import read_recording
+        return _simulate(rom_params, settings), "rom"
     from crashdem.run import default_output, run_scenario
 
     def channels(path):
-        res = read_recording(path)
-        got = {rom_name: _pick(res, name, rom_name) for name, rom_name in cmap.items()}
+        got = _result_channels(path, cmap)
         return got if all(v is not None for v in got.values()) else None
 
     path = default_output(scen, None)
@@ -323,9 +446,32 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams, settings: RomSe
     got = channels(path)
     if got is None:
         raise ValueError(f"diagnose: the baseline run {path} has none of the diagnosed channels "
-                         f"{sorted(cmap)} (nor {sorted(SIM_CHANNELS.values())}); map them with "
+                         f"{sorted(cmap)} (nor {sorted(sum(SIM_CHANNELS.values(), ()))}); map them with "
                          "--channel NAME:accel_z")
     return got, f"full run {path}"
+
+
+def _result_channels(path: Path, cmap: dict[str, str]) -> dict[str, Signal | None]:
+    """The diagnosed channels (CFC-filtered as written) of a crashdem result file, by model
+    channel name (None where missing). Only these channels are read: another channel of the
+    run may legitimately hold NaN (an accelerometer marked failed past its full scale, e.g. the
+    glider's nose pair), which must not make the run unusable."""
+    from crashdem.results import open_result
+
+    res = open_result(Path(path))
+    try:
+        out: dict[str, Signal | None] = {}
+        for name, rom_name in cmap.items():
+            n = name if name in res else sim_channel(res, rom_name)
+            if n is None:
+                out[rom_name] = None
+                continue
+            s = res.channel(n, filtered=True)
+            out[rom_name] = Signal(rom_name, np.asarray(s.t), np.asarray(s.data), s.unit, s.cfc,
+                                   {**s.meta, "recorded_name": n})
+        return out
+    finally:
+        res.close()
 
 
 def _baseline_raw(source: str, cmap: dict[str, str]) -> dict[str, Signal] | None:
@@ -343,7 +489,7 @@ def _baseline_raw(source: str, cmap: dict[str, str]) -> dict[str, Signal] | None
     try:
         out: dict[str, Signal] = {}
         for name, rom_name in cmap.items():
-            for n in (name, SIM_CHANNELS.get(rom_name)):
+            for n in (name, sim_channel(res, rom_name)):
                 if n is not None and n in res:
                     out[rom_name] = res.channel(n, filtered=False)
                     break

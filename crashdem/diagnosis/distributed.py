@@ -147,7 +147,7 @@ class DaskFullSimulator:
                               f"{o.error}" for o in failed)
             raise RuntimeError(f"full-simulation confirmation: {len(failed)} of {len(outcomes)} "
                                f"runs failed ({path}): {lines}")
-        from crashdem.diagnosis.cli import SIM_CHANNELS
+        from crashdem.diagnosis.cli import sim_channel
 
         out: list[dict[str, Signal]] = []
         with en.open_ensemble(path) as ens:
@@ -157,7 +157,7 @@ class DaskFullSimulator:
                 got = {}
                 for name, new in cmap.items():
                     # the recorded name, else the impactor channel standing for the model one
-                    src = name if name in names else SIM_CHANNELS.get(new)
+                    src = name if name in names else sim_channel(names, new)
                     if src in names:
                         got[new] = _renamed(ens.channel(o.index, src, filtered=self.filtered), new)
                 out.append(got)

@@ -73,17 +73,21 @@ class ConcealedCase:
     meta: dict[str, float] = field(default_factory=dict)
 
 
-def draw_effect(effect: str, rng: np.random.Generator) -> dict[str, float]:
-    """Draw the parameters of ``effect`` from ``EFFECT_DRAWS``."""
-    if effect not in EFFECT_DRAWS:
-        raise ValueError(f"effect={effect!r}: unknown; known: {sorted(EFFECT_DRAWS)}")
+def draw_effect(effect: str, rng: np.random.Generator,
+                draws: dict[str, dict[str, tuple[float, float, str]]] | None = None,
+                signed: str = "speed_offset") -> dict[str, float]:
+    """Draw the parameters of ``effect`` from ``draws`` (default ``EFFECT_DRAWS``); the
+    parameter ``signed``, when drawn, gets a random sign (one more draw)."""
+    draws = EFFECT_DRAWS if draws is None else draws
+    if effect not in draws:
+        raise ValueError(f"effect={effect!r}: unknown; known: {sorted(draws)}")
     out = {}
-    for name, (lo, hi, scale) in EFFECT_DRAWS[effect].items():
+    for name, (lo, hi, scale) in draws[effect].items():
         u = rng.uniform()
         out[name] = (math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))) if scale == "log"
                      else lo + u * (hi - lo))
-    if effect == "initial_conditions" and rng.uniform() < 0.5:
-        out["speed_offset"] = -out["speed_offset"]
+    if signed in out and rng.uniform() < 0.5:
+        out[signed] = -out[signed]
     return out
 
 

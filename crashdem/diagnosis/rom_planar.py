@@ -11,8 +11,12 @@ moves under the nose force and gravity; the torque about the CG turns it in pitc
 Channels (body axes at the CG, specific force like an accelerometer): ``accel_x``, ``accel_z``
 [m/s^2] (mount resonance and CFC applied like the drop ROM) and ``pitch_rate`` [rad/s].
 
-Status: a complete model with its own tests; not yet wired into the catalogue fits (those use
-the drop ROM's parameter names); structural crush along the body axis is not represented here.
+Also: a crushable nose (a nose mass sliding along the body x axis behind the drop model's
+force-limited element; the axial soil load reaches the body through it, the lateral load
+directly), a penalty contact of the nose sphere on a vertical rear wall, and the
+accelerometer's position (its rigid-body rotation terms). It is the screening model of glider
+scenarios (``PlanarSimulator``, ``catalogue.planar_catalogue``, ``cli.planar_from_scenario``;
+docs/diagnosis.md "Glider scenarios").
 
 Notes
 -----
@@ -23,7 +27,7 @@ pitch inertia 250 kg m^2 (exudyn_coupling.md test body) are defaults, not measur
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
@@ -32,7 +36,10 @@ from crashdem.diagnosis import _rom_kernels as _k
 from crashdem.diagnosis.rom import RomParams, RomSettings, _check, sample_grid
 from crashdem.signal import Signal
 
-__all__ = ["PlanarParams", "simulate_planar", "run_planar_raw"]
+__all__ = ["PlanarParams", "simulate_planar", "run_planar_raw", "PlanarSimulator", "PLANAR_CHANNELS"]
+
+#: channels of the planar model that a diagnosis compares (primary first)
+PLANAR_CHANNELS = ("accel_x", "accel_z", "pitch_rate")
 
 #: tangential velocity scale of the friction regularisation [m/s]
 FRICTION_V_REG = 0.05
@@ -55,6 +62,13 @@ class PlanarParams:
     pitch : pitch attitude at contact, nose up positive [rad] in [-pi/2, pi/2]
     friction : Coulomb coefficient nose/soil [-] >= 0
     angle_offset, pitch_offset : initial-condition offsets [rad]
+    nose_height : height of the nose-sphere centre above the CG along body z [m]
+    wall_distance : horizontal distance from the first contact point to a vertical rigid wall
+        ahead (the container's rear wall) [m] > 0 (inf = no wall)
+    wall_stiffness : wall contact stiffness [N/m] > 0 (the panel's generalised stiffness)
+    wall_damping : damping ratio of the wall contact [-] in [0, 2]
+    mount_x, mount_z : accelerometer position from the CG in body axes [m] (the channels
+        ``accel_x`` / ``accel_z`` include its rigid-body rotation terms)
     """
 
     soil: RomParams = field(default_factory=_glider_soil)
@@ -66,6 +80,12 @@ class PlanarParams:
     friction: float = 0.5
     angle_offset: float = 0.0
     pitch_offset: float = 0.0
+    nose_height: float = 0.0
+    wall_distance: float = math.inf
+    wall_stiffness: float = 2.0e6
+    wall_damping: float = 0.2
+    mount_x: float = 0.0
+    mount_z: float = 0.0
 
     def __post_init__(self) -> None:
         _check("PlanarParams.pitch_inertia", self.pitch_inertia, 0.0, math.inf, "kg*m^2",
@@ -77,12 +97,40 @@ class PlanarParams:
         _check("PlanarParams.friction", self.friction, 0.0, 5.0, "1")
         _check("PlanarParams.angle_offset", self.angle_offset, -0.6, 0.6, "rad")
         _check("PlanarParams.pitch_offset", self.pitch_offset, -0.6, 0.6, "rad")
+        _check("PlanarParams.nose_height", self.nose_height, -5.0, 5.0, "m")
+        _check("PlanarParams.wall_distance", self.wall_distance, 0.0, math.inf, "m", lo_open=True)
+        _check("PlanarParams.wall_stiffness", self.wall_stiffness, 0.0, 1e12, "N/m", lo_open=True)
+        _check("PlanarParams.wall_damping", self.wall_damping, 0.0, 2.0, "1")
+        _check("PlanarParams.mount_x", self.mount_x, -20.0, 20.0, "m")
+        _check("PlanarParams.mount_z", self.mount_z, -5.0, 5.0, "m")
+
+    @property
+    def v0(self) -> float:
+        """Actual impact speed [m/s] (the soil record's speed plus its offset)."""
+        return self.soil.v0
+
+    def with_values(self, values: dict[str, float]) -> "PlanarParams":
+        """A copy with planar fields, soil fields (``RomParams``) or recalibration scales
+        (``rom.SCALE_KEYS``) replaced by ``values``."""
+        own = {f.name for f in fields(self)} - {"soil"}
+        mine = {k: float(v) for k, v in values.items() if k in own}
+        rest = {k: v for k, v in values.items() if k not in own}
+        return replace(self, soil=self.soil.with_values(rest) if rest else self.soil, **mine)
 
 
 @_k.jit
-def _run_planar(p, mass, inertia, d, slope, gamma, theta0, mu, dt, n_steps):
+def _run_planar(p, mass, inertia, d, h, slope, gamma, theta0, mu, dt, n_steps, wall_x, wall_k,
+                wall_zeta, mx, mz):
     """Semi-implicit Euler of the planar impactor from first contact; arrays per step:
-    t, specific force body-x, body-z [m/s^2], pitch rate [rad/s], penetration [m]."""
+    t, specific force body-x, body-z at the mount (mx, mz) [m/s^2], pitch rate [rad/s],
+    penetration [m].
+
+    Nose-sphere centre at (d, h) in body axes from the CG. Crush (``p[P_FC]`` finite): a nose
+    mass ``p[P_NOSE] mass`` slides along the body x axis behind a force-limited element
+    (``_crush_update``); the soil's axial load reaches the body through it, the lateral load
+    directly. Rear wall (``wall_x`` < 1e299): a vertical plane ``wall_x`` ahead of the first
+    contact point, penalty contact of stiffness ``wall_k`` and damping ratio ``wall_zeta`` on
+    the nose sphere (compression only)."""
     n = n_steps + 1
     t_o = np.empty(n)
     fx_o = np.empty(n)
@@ -91,17 +139,26 @@ def _run_planar(p, mass, inertia, d, slope, gamma, theta0, mu, dt, n_steps):
     pen_o = np.empty(n)
     g = p[_k.P_G]
     rn = p[_k.P_RADIUS]
+    crush = p[_k.P_FC] < 1e15
+    m_n = p[_k.P_NOSE] * mass if crush else 0.0
+    m_b = mass - m_n
+    wall = wall_x < 1e299
+    c_w = 2.0 * wall_zeta * math.sqrt(wall_k * mass) if wall else 0.0
     nx, nz = math.sin(slope), -math.cos(slope)  # inward normal (into the soil)
     tx, tz = math.cos(slope), math.sin(slope)  # surface tangent (up-slope)
     th = theta0
     # nose centre touches the surface at the origin: c = -rn n
     cx, cz = -rn * nx, -rn * nz
-    rx = cx - d * math.cos(th)
-    rz = cz - d * math.sin(th)
+    rx = cx - d * math.cos(th) + h * math.sin(th)
+    rz = cz - d * math.sin(th) - h * math.cos(th)
     v0 = p[_k.P_V0]
     ux, uz = v0 * math.cos(gamma), -v0 * math.sin(gamma)
     w = 0.0
     fs = 0.0
+    sr = 0.0  # crush: axial compression of the element [m] and its rate [m/s]
+    vr = 0.0
+    fcr = 0.0
+    sp = 0.0
     t_o[0] = 0.0
     fx_o[0] = 0.0
     fz_o[0] = 0.0
@@ -110,10 +167,11 @@ def _run_planar(p, mass, inertia, d, slope, gamma, theta0, mu, dt, n_steps):
     for k in range(n_steps):
         t = k * dt
         ex, ez = math.cos(th), math.sin(th)
-        cx = rx + d * ex
-        cz = rz + d * ez
-        vcx = ux - w * d * ez
-        vcz = uz + w * d * ex
+        dd = d - sr
+        cx = rx + dd * ex - h * ez
+        cz = rz + dd * ez + h * ex
+        vcx = ux - w * (dd * ez + h * ex) - vr * ex
+        vcz = uz + w * (dd * ex - h * ez) - vr * ez
         delta = rn + (cx * nx + cz * nz)
         vn = vcx * nx + vcz * nz
         fn, fs = _k._soil_update(delta, vn, fs, dt, t, p)
@@ -121,19 +179,43 @@ def _run_planar(p, mass, inertia, d, slope, gamma, theta0, mu, dt, n_steps):
         ft = -mu * (fn if fn > 0.0 else 0.0) * math.tanh(vt / 0.05)
         fx = -fn * nx + ft * tx
         fz = -fn * nz + ft * tz
-        tau = d * (ex * fz - ez * fx)
-        ux += dt * fx / mass
-        uz += dt * (fz / mass - g)
-        w += dt * tau / inertia
+        if wall:
+            pw = cx + rn - wall_x
+            if pw > 0.0:
+                fw = wall_k * pw + c_w * vcx
+                if fw > 0.0:
+                    fx -= fw
+        if crush:
+            fa = fx * ex + fz * ez  # axial (on the nose)
+            fl = -fx * ez + fz * ex  # lateral (straight to the body)
+            fcr, sp = _k._crush_update(fcr, sp, vr, dt, p)
+            bx = -fcr * ex - fl * ez
+            bz = -fcr * ez + fl * ex
+            tau = dd * fl - h * (-fcr)
+            vr += dt * (-fcr / m_b - (fa + fcr) / m_n)
+            sr += dt * vr
+        else:
+            bx, bz = fx, fz
+            tau = dd * (ex * fz - ez * fx) - h * (ex * fx + ez * fz)
+        ux += dt * bx / m_b
+        uz += dt * (bz / m_b - g)
+        alpha = tau / inertia
+        w += dt * alpha
         rx += dt * ux
         rz += dt * uz
         th += dt * w
         t_o[k + 1] = (k + 1) * dt
-        fx_o[k + 1] = (fx * ex + fz * ez) / mass
-        fz_o[k + 1] = (-fx * ez + fz * ex) / mass
+        ax_b = (bx * ex + bz * ez) / m_b
+        az_b = (-bx * ez + bz * ex) / m_b
+        if mx != 0.0 or mz != 0.0:  # rigid-body acceleration of the mount relative to the CG
+            ax_b += -alpha * mz - w * w * mx
+            az_b += alpha * mx - w * w * mz
+        fx_o[k + 1] = ax_b
+        fz_o[k + 1] = az_b
         w_o[k + 1] = w
         # penetration after the step (as the drop ROM reports its depth)
-        d_new = rn + ((rx + d * math.cos(th)) * nx + (rz + d * math.sin(th)) * nz)
+        e2x, e2z = math.cos(th), math.sin(th)
+        d_new = rn + ((rx + (d - sr) * e2x - h * e2z) * nx + (rz + (d - sr) * e2z + h * e2x) * nz)
         pen_o[k + 1] = d_new if d_new > 0.0 else 0.0
     return t_o, fx_o, fz_o, w_o, pen_o
 
@@ -143,13 +225,18 @@ def run_planar_raw(params: PlanarParams, settings: RomSettings = RomSettings()):
     with the mount resonance applied to both specific forces when enabled."""
     s = params.soil
     n_steps = int(math.ceil(settings.t_end / settings.dt))
+    wall_x = params.wall_distance if math.isfinite(params.wall_distance) else 1e300
     t, fx, fz, w, pen = _run_planar(s.to_array(), s.mass, params.pitch_inertia, params.nose_offset,
-                                    params.slope, params.path_angle + params.angle_offset,
+                                    params.nose_height, params.slope,
+                                    params.path_angle + params.angle_offset,
                                     params.pitch + params.pitch_offset, params.friction,
-                                    settings.dt, n_steps)
+                                    settings.dt, n_steps, wall_x, params.wall_stiffness,
+                                    params.wall_damping, params.mount_x, params.mount_z)
     if math.isfinite(s.mount_frequency):
-        fx = _dsp.mount_filter_bilinear(fx, settings.dt, s.mount_frequency, s.mount_damping)
-        fz = _dsp.mount_filter_bilinear(fz, settings.dt, s.mount_frequency, s.mount_damping)
+        fx = _dsp.mount_filter_bilinear(fx, settings.dt, s.mount_frequency, s.mount_damping,
+                                          s.mount_form)
+        fz = _dsp.mount_filter_bilinear(fz, settings.dt, s.mount_frequency, s.mount_damping,
+                                          s.mount_form)
     return t, fx, fz, w, pen
 
 
@@ -171,3 +258,23 @@ def simulate_planar(params: PlanarParams, settings: RomSettings = RomSettings())
             data = _dsp.cfc(data, settings.sample_rate, cfc)
         out[name] = Signal(name, ts.copy(), data, unit, cfc, dict(meta))
     return out
+
+
+class PlanarSimulator:
+    """The planar ROM behind the diagnosis's simulator interface
+    ``simulate(values: dict) -> dict[str, Signal]``: ``values`` may hold ``PlanarParams``
+    fields, ``RomParams`` (soil) fields and the recalibration scales; ``catalogue`` is the
+    hypothesis set whose parameters it understands (``catalogue.planar_catalogue``)."""
+
+    def __init__(self, base: PlanarParams = PlanarParams(), settings: RomSettings = RomSettings(),
+                 catalogue=None):
+        from crashdem.diagnosis import catalogue as _cat
+
+        self.base = base
+        self.settings = settings
+        self.catalogue = catalogue if catalogue is not None else _cat.planar_catalogue(base)
+        self.calls = 0
+
+    def __call__(self, params: dict[str, float] | None = None) -> dict[str, Signal]:
+        self.calls += 1
+        return simulate_planar(self.base.with_values(params or {}), self.settings)

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import json
+import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -195,3 +197,77 @@ def test_confirmation_falls_back_to_local_runs_when_the_cluster_is_unusable():
 
     with pytest.raises(RuntimeError, match="runs failed"):
         _LocalFallback(Failing(), lambda ov: ov, lambda: None).map([{}])
+
+
+def test_cli_diagnoses_a_glider_recording(tmp_path):
+    """``crashdem diagnose`` on a glider scenario (``validation/scenarios/glider_real.toml``):
+    the planar model is built from the scenario's fuselage, slope, rear wall and sensors
+    (``cli.planar_from_scenario``), the recording's ``rear_accel_x`` / ``rear_accel_z`` /
+    ``pitch_rate`` are matched by the glider's names, and a crushable nose concealed in a
+    planar-truth recording (other step, nose size and mount position) is named with its
+    crush force and stroke within 15 %, the report saying which catalogue was used."""
+    from pathlib import Path
+
+    from crashdem import cli, recordings
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.cli import planar_from_scenario
+    from crashdem.diagnosis.generator_planar import planar_concealed_case
+
+    toml = Path(__file__).resolve().parents[3] / "validation" / "scenarios" / "glider_real.toml"
+    base = planar_from_scenario(sc.load(toml))
+    assert base.soil.mass == pytest.approx(343.0) and base.slope == pytest.approx(math.pi / 4)
+    assert 1.0 < base.wall_distance < 2.4 and base.nose_offset > 1.0
+    case = planar_concealed_case(11, "structural_crush", base=base)
+    names = {"accel_x": "rear_accel_x", "accel_z": "rear_accel_z", "pitch_rate": "pitch_rate"}
+    rec_path = recordings.write_recording(
+        tmp_path / "glider.csv", {names[k]: replace(s, name=names[k]) for k, s in case.recording.items()})
+    out = tmp_path / "out"
+    rc = cli.main(["diagnose", "--scenario", str(toml), "--recording", str(rec_path),
+                   "--out", str(out), "--baseline", "rom"])
+    assert rc == 0
+    d = json.loads((out / "report.json").read_text())
+    assert d["catalogue_model"] == "planar"
+    assert d["channels"] == ["accel_x", "accel_z", "pitch_rate"]
+    assert d["missing_physics"] == "structural_crush", d["decision"]
+    h = d["hypotheses"][0]
+    for k, v in case.values.items():
+        assert abs(h["parameters"][k] / v - 1.0) < 0.15, (k, h["parameters"][k], v)
+    assert h["scenario_overrides"]["physics.structural_crush.enabled"] is True
+    assert (out / "overlay_accel_x.png").exists() and (out / "overlay_pitch_rate.png").exists()
+
+
+def test_result_channels_ignore_a_failed_sensor_elsewhere_in_the_run(tmp_path):
+    """A run whose nose accelerometer is marked failed (NaN after its failure, by design) is
+    still read for the diagnosed channels: the full-DEM confirmation of a glider candidate
+    must not be lost to an unrelated channel (it was: a pitch-offset run of the small glider
+    broke the front pair). The channels read are the stored CFC-filtered ones, named by the
+    model."""
+    from crashdem.diagnosis.cli import _result_channels
+    from crashdem.results import ResultWriter, open_result
+    from crashdem.sensors import Accelerometer, BodyState, Gyroscope, SensorSet
+    from crashdem.signal import G0
+
+    ss = SensorSet([
+        Accelerometer(name="rear_accel_x", body="glider", position=(-2.0, 0, 0.1),
+                      axis=(1, 0, 0), full_scale=250 * G0, cfc=60),
+        Accelerometer(name="front_accel_z", body="glider", position=(1.5, 0, 0),
+                      axis=(0, 0, 1), full_scale=5 * G0, failure_factor=1.2, cfc=60),
+        Gyroscope(name="pitch_rate", body="glider", cfc=60)], fs=12500.0)
+    path = tmp_path / "run.h5"
+    with ResultWriter(path, scenario_toml='title = "g"\n', parameters={"title": "g"}) as w:
+        w.declare_sensors(ss)
+        for i in range(2000):
+            t = i * 3.0e-5
+            pulse = 15 * G0 * math.sin(math.pi * t / 0.06) ** 2
+            ss.record(t, {"glider": BodyState(position=(0, 0, 1), rotation=np.eye(3),
+                                              acceleration=(pulse, 0, pulse),
+                                              angular_velocity=(0, -math.sin(40 * t), 0))}, {})
+        w.append_sensors(ss)
+    with open_result(path) as res:
+        assert not np.all(np.isfinite(res["front_accel_z"].data))  # the failure is real
+        want = res["rear_accel_x"].data
+    got = _result_channels(path, {"rear_accel_x": "accel_x", "pitch_rate": "pitch_rate",
+                                  "accel_z": "accel_z"})
+    assert got["accel_z"] is None  # no rear_accel_z in this run
+    assert np.array_equal(got["accel_x"].data, want) and got["accel_x"].cfc == 60.0
+    assert got["pitch_rate"].unit == "rad/s"

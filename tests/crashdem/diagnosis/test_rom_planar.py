@@ -65,3 +65,58 @@ def test_glider_defaults_run_and_channels():
         assert np.all(np.isfinite(s.data))
     with pytest.raises(ValueError, match=r"PlanarParams\.slope=2"):
         PlanarParams(slope=2.0)
+
+
+NO_GRAVITY_SOIL = RomParams(mass=343.0, radius=0.15, impact_speed=10.0, gravity=0.0)
+
+
+def test_rear_wall_impact_is_a_spring_mass_collision():
+    """Oracle (linear oscillator): a nose sliding along level ground (no gravity, no friction,
+    so no soil load) into an undamped wall of stiffness k is a mass on a spring: contact lasts
+    pi sqrt(m/k), the peak deceleration is v sqrt(k/m) and the body leaves at its impact speed
+    (elastic wall, energy conserved)."""
+    m, v, k = 343.0, 10.0, 2.0e6
+    pp = PlanarParams(soil=NO_GRAVITY_SOIL, nose_offset=0.0, slope=0.0, path_angle=0.0,
+                      friction=0.0, wall_distance=0.2, wall_stiffness=k, wall_damping=0.0)
+    s = RomSettings(dt=1e-6, t_end=0.05, sample_rate=20000.0, cfc=None)
+    t, fx, fz, w, pen = run_planar_raw(pp, s)
+    loaded = fx < 0.0
+    duration = float(np.count_nonzero(loaded)) * s.dt
+    assert abs(duration / (math.pi * math.sqrt(m / k)) - 1.0) < 2e-3
+    assert abs(-fx.min() / (v * math.sqrt(k / m)) - 1.0) < 2e-3
+    v_out = v + np.sum(fx) * s.dt  # body-x velocity after the contact
+    assert abs(v_out / -v - 1.0) < 2e-3
+    assert np.max(np.abs(fz)) < 1e-9 and np.max(pen) == 0.0
+
+
+def test_crush_element_limits_the_axial_load_on_the_body():
+    """Oracle (force-limited series element): while the nose crushes (stroke not used up), the
+    body's axial specific force is the crush force over the body mass, never more: |a_x| <=
+    F_c / (m (1 - nose fraction)); with a rigid nose the same impact decelerates harder."""
+    fc = 4.0e4
+    soil = RomParams(mass=343.0, radius=0.15, impact_speed=18.33, crush_strength=fc,
+                     crush_stroke=0.5)
+    pp = PlanarParams(soil=soil, nose_offset=1.3)
+    s = RomSettings(dt=5e-6, t_end=0.03, cfc=None)
+    t, fx, fz, w, pen = run_planar_raw(pp, s)
+    m_b = 343.0 * (1.0 - soil.nose_mass_fraction)
+    assert np.max(np.abs(fx)) <= fc / m_b * (1.0 + 1e-9)
+    assert np.max(np.abs(fx)) > 0.99 * fc / m_b  # the element does yield
+    rigid = run_planar_raw(PlanarParams(soil=RomParams(mass=343.0, radius=0.15,
+                                                      impact_speed=18.33), nose_offset=1.3), s)
+    assert np.max(np.abs(rigid[1])) > 1.5 * fc / m_b
+
+
+def test_mount_offset_channel_integrates_to_the_pitch_rate():
+    """Oracle (rigid-body kinematics, independent output): an accelerometer a distance L ahead
+    of the CG along body x reads a_z(CG) + L dw/dt - ..., so the time integral of
+    (a_z(mount) - a_z(CG)) / L equals the pitch rate channel w(t) (to the integration error)."""
+    base = dict(soil=RomParams(mass=343.0, radius=0.15, impact_speed=18.33), nose_offset=1.3)
+    s = RomSettings(dt=5e-6, t_end=0.15, cfc=None)
+    big_l = 1.0
+    t, _, fz0, w, _ = run_planar_raw(PlanarParams(**base), s)
+    _, fx1, fz1, _, _ = run_planar_raw(PlanarParams(mount_x=big_l, **base), s)
+    # the mount term also holds -w^2 L along x; along z only alpha L
+    integ = np.concatenate([[0.0], np.cumsum(fz1[1:] - fz0[1:]) * s.dt / big_l])
+    assert np.max(np.abs(integ - w)) < 1e-6 * np.max(np.abs(w)) + 1e-9
+    assert np.max(np.abs(w)) > 1.0  # the body does rotate
