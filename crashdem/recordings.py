@@ -476,8 +476,24 @@ def _read_hdf5(path: Path) -> dict[str, Signal]:
         return out
 
 
+def _until_failure(s: Signal) -> Signal:
+    """A result channel whose sensor failed (``failed_at`` in its meta: e.g. an accelerometer
+    past its failure scale, whose tail the result stores as NaN) ends at the failure, as the
+    lab channel of a broken transducer does; ``meta['truncated_at_failure']`` says so. Other
+    channels, and NaN anywhere else, are left to ``validate``."""
+    if s.meta.get("failed_at") is None or np.all(np.isfinite(s.data)):
+        return s
+    finite = np.isfinite(s.data)
+    n_ok = int(np.argmin(finite))
+    if finite[n_ok:].any() or n_ok == 0:
+        return s
+    meta = dict(s.meta, truncated_at_failure=float(s.t[n_ok]))
+    return Signal(s.name, s.t[:n_ok].copy(), s.data[:n_ok].copy(), s.unit, s.cfc, meta)
+
+
 def _read_result(path: Path) -> dict[str, Signal]:
-    """A crashdem result file: via ``crashdem.results.open_result`` if available, else direct."""
+    """A crashdem result file: via ``crashdem.results.open_result`` if available, else direct.
+    A failed sensor's channel ends at its failure (``_until_failure``)."""
     try:
         from crashdem.results import open_result  # type: ignore[attr-defined]
     except ImportError:
@@ -492,7 +508,7 @@ def _read_result(path: Path) -> dict[str, Signal]:
             for n in names:
                 s = res[n]
                 if isinstance(s, Signal):
-                    out[s.name] = s
+                    out[s.name] = _until_failure(s)
             if out:
                 return out
         finally:

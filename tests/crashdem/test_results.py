@@ -469,3 +469,26 @@ def test_j211_sign_attribute(tmp_path):
     with h5py.File(tmp_path / "s.h5", "r") as f:
         signs = {n: int(f["channels"][n].attrs["j211_sign"]) for n in f["channels"]}
     assert signs == {"up": -1, "down": 1, "fwd": 1, "left": -1, "plain": 0}
+
+
+def test_result_with_a_failed_sensor_reads_as_a_recording(tmp_path):
+    """A result whose accelerometer failed (NaN tail by design) is a valid recording
+    (``crashdem.recordings.read_recording``, e.g. ``crashdem diagnose --recording run.h5``):
+    the failed channel ends at its failure, like a broken transducer's lab channel, with the
+    same samples as the result before it; the other channels are whole."""
+    from crashdem.recordings import read_recording
+
+    path = tmp_path / "run.h5"
+    write_run(path)
+    rec = read_recording(path)
+    with open_result(path) as res:
+        full = res["front_accel_z"]
+        n_ok = int(np.argmin(np.isfinite(full.data)))
+        assert 0 < n_ok < full.data.size
+        f = rec["front_accel_z"]
+        assert f.data.size == n_ok and np.array_equal(f.data, full.data[:n_ok])
+        assert f.meta["truncated_at_failure"] == pytest.approx(float(full.t[n_ok]))
+        # the first NaN sample is the one whose acquisition interval holds the failure
+        assert abs(f.meta["truncated_at_failure"] - f.meta["failed_at"]) <= 1.0 / FS
+        assert np.array_equal(rec["rear_accel_x"].data, res["rear_accel_x"].data)
+        assert "truncated_at_failure" not in rec["rear_accel_x"].meta
