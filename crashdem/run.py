@@ -342,6 +342,23 @@ def default_output(scen: Scenario, out_dir: str | os.PathLike | None) -> Path:
 LEDGER_EVERY = 10
 
 
+def share_packings(run_dir: str | os.PathLike, cache: str | os.PathLike) -> None:
+    """Let the runs written to ``run_dir`` reuse (and add to) the deposited beds in ``cache``:
+    ``run_scenario`` caches its packings in ``<out_dir>/packings``, which becomes a link to
+    ``cache`` (both directories are created) unless it exists already. On a file system
+    without symbolic links nothing is linked and the runs deposit their own beds."""
+    run_dir, cache = Path(run_dir), Path(cache)
+    link = run_dir / "packings"
+    if link.exists() or link.is_symlink():
+        return
+    try:
+        run_dir.mkdir(parents=True, exist_ok=True)
+        cache.mkdir(parents=True, exist_ok=True)
+        link.symlink_to(cache.resolve(), target_is_directory=True)
+    except OSError:
+        pass
+
+
 def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
                  resume: bool = False, plots: bool | None = None) -> Path:
     """Run a scenario end to end and return the HDF5 result path.

@@ -25,6 +25,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -54,18 +55,6 @@ CASES: dict[str, tuple[str | None, dict]] = {
 CHANNELS = {"rear_accel_x": "accel_x", "rear_accel_z": "accel_z", "pitch_rate": "pitch_rate"}
 
 
-def _link_cache(run_dir: Path) -> None:
-    """Share the packing cache between the baseline, the truths and the confirmations."""
-    run_dir.mkdir(parents=True, exist_ok=True)
-    CACHE.mkdir(parents=True, exist_ok=True)
-    link = run_dir / "packings"
-    if not link.exists() and not link.is_symlink():
-        try:
-            link.symlink_to(CACHE, target_is_directory=True)
-        except OSError:
-            pass
-
-
 def _sets(ov: dict) -> list[str]:
     out = []
     for k, v in ov.items():
@@ -76,22 +65,22 @@ def _sets(ov: dict) -> list[str]:
 def truth_recording(name: str, overrides: dict, out: Path, seed: int,
                     numerics: dict | None = None) -> Path:
     """Run the truth and write its lab-acquired recording (CSV, glider channel names)."""
+    import h5py
+
     from crashdem import recordings
     from crashdem import scenario as sc
     from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
     from crashdem.diagnosis.generator_planar import RAW_NOISE_PLANAR
     from crashdem.results import open_result
-    from crashdem.run import run_scenario
+    from crashdem.run import run_scenario, share_packings
 
     runs = out / "truth_runs"
-    _link_cache(runs)
+    share_packings(runs, CACHE)
     num = TRUTH_NUMERICS if numerics is None else numerics
     scen = sc.load(SCENARIO, {**SMALL, **num, **overrides,
                               "scenario.name": f"glider_truth_{name}"})
     path = run_scenario(scen, out_dir=runs, progress=False, plots=False)
     rng = np.random.default_rng(seed)
-    import h5py
-
     with h5py.File(path, "r") as h:
         t_contact = float(h["run"].attrs["t_contact"])
     with open_result(path) as res:
@@ -101,11 +90,8 @@ def truth_recording(name: str, overrides: dict, out: Path, seed: int,
                           scen["glider.release_speed"], rng, t_pre=0.018, t_end=float(t[-1]),
                           trigger_offset=float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER)),
                           noise=RAW_NOISE_PLANAR, source=f"crashdem glider DEM truth {name}")
-    named = {n: rec[m] for n, m in CHANNELS.items()}
-    from dataclasses import replace
-
     return recordings.write_recording(out / f"{name}.csv",
-                                      {n: replace(s, name=n) for n, s in named.items()})
+                                      {n: replace(rec[m], name=n) for n, m in CHANNELS.items()})
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -124,12 +110,12 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"--cases: {c!r} unknown; known: {list(CASES)}")
     from crashdem import cli
     from crashdem import scenario as sc
-    from crashdem.run import run_scenario
+    from crashdem.run import run_scenario, share_packings
 
     out = Path(args.out).resolve()
     t0 = time.perf_counter()
     base_dir = out / "baseline_run"
-    _link_cache(base_dir)
+    share_packings(base_dir, CACHE)
     base_ov = {**SMALL, "output.directory": str(base_dir), "scenario.name": "glider_small"}
     base_path = base_dir / "glider_small.h5"
     if not base_path.exists():

@@ -30,7 +30,7 @@ from typing import Any, Callable, Mapping, Sequence
 import numpy as np
 
 from crashdem.diagnosis import catalogue
-from crashdem.diagnosis.catalogue import CATALOGUE, RECALIBRATION, Hypothesis
+from crashdem.diagnosis.catalogue import CATALOGUE, RECALIBRATION, Hypothesis, ParameterSpec
 from crashdem.diagnosis.fit import (ACCEPT_MARGIN, MIN_SCORE_GAIN, PRE_ONSET, WITHIN_NOISE_RATIO,
                                     FitProblem, FitResult, event_window, fit_hypothesis,
                                     fit_variants, metric_name, rank, score_signals)
@@ -1097,12 +1097,17 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
 OFF_TOLERANCE = 0.02
 
 
+def _at_off(p: ParameterSpec, value: float) -> bool:
+    """True when ``value`` of a parameter that has an ``off`` value is within
+    ``OFF_TOLERANCE`` of it in the unit-box search coordinate (the effect is left off)."""
+    return p.off is not None and abs(p.to_unit(value) - p.to_unit(p.off)) < OFF_TOLERANCE
+
+
 def _left_off(h: Hypothesis, values: Mapping[str, float]) -> bool:
-    """True when every parameter of ``h`` that has an ``off`` value is within
-    ``OFF_TOLERANCE`` of it (in the unit-box search coordinate) and at least one has one."""
+    """True when every parameter of ``h`` that has an ``off`` value is at it (``_at_off``) and
+    at least one has one."""
     specs = [p for p in h.parameters if p.off is not None and p.name in values]
-    return bool(specs) and all(abs(p.to_unit(values[p.name]) - p.to_unit(p.off)) < OFF_TOLERANCE
-                               for p in specs)
+    return bool(specs) and all(_at_off(p, values[p.name]) for p in specs)
 
 
 def _confirmation_overrides(h: dict[str, Any],
@@ -1115,8 +1120,7 @@ def _confirmation_overrides(h: dict[str, Any],
     hyp = cat.get(h["name"])
     vals = dict(h["parameters"])
     for p in hyp.parameters:
-        if p.off is not None and p.name in vals and \
-                abs(p.to_unit(vals[p.name]) - p.to_unit(p.off)) < OFF_TOLERANCE:
+        if p.name in vals and _at_off(p, vals[p.name]):
             vals[p.name] = p.nominal
     return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
 

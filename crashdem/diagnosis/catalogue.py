@@ -449,9 +449,9 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
                 ("The container's rear wall nearer than modelled or of another compliance: the "
                  "nose reaches it and a second longitudinal peak appears (thesis section 2.4); "
                  "penalty contact of the nose on a vertical wall."),
-                (ParameterSpec("wall_distance", "m", 0.2, d_hi, min(d0, 0.75 * d0), "lin",
+                (ParameterSpec("wall_distance", "m", 0.2, d_hi, 0.75 * d0, "lin",
                                "horizontal distance from the first contact point to the rear "
-                               "wall", None, off=min(d0, d_hi), grid=24),
+                               "wall", None, off=d0, grid=24),
                  ParameterSpec("wall_stiffness", "N/m", k0 / 30.0, k0 * 30.0, k0, "log",
                                "rear-wall stiffness at the nose (panel generalised stiffness)",
                                None, off=k0, grid=3)),

@@ -20,11 +20,11 @@ from __future__ import annotations
 
 import argparse
 import math
-
-import numpy as np
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from crashdem.diagnosis.rom import ACCEL, VELOCITY, RomParams, RomSettings, simulate
 from crashdem.diagnosis.rom_planar import PLANAR_CHANNELS, PlanarParams, simulate_planar
@@ -111,9 +111,10 @@ def planar_from_scenario(scen) -> PlanarParams:
     fit. The horizontal compaction layers are not represented (the impact point lies in the
     compacted part, thesis section 2.4); ``soil_layering`` is not in the planar catalogue.
     """
-    import numpy as np
+    import bodies
 
-    from crashdem.glider import _support_vertex, glider_spec, pitch_rotation, wall_panels
+    from crashdem.glider import (NOSE_CUT_STATION, _support_vertex, glider_spec, pitch_rotation,
+                                 wall_panels)
 
     spec = glider_spec(scen)
     gl = scen.get("glider")
@@ -148,11 +149,8 @@ def planar_from_scenario(scen) -> PlanarParams:
                                  "impact_speed": math.hypot(vx, vz), "density": density,
                                  "floor_depth": h_imp / math.cos(alpha)}
     # the crushable nose of the full model (glider.NOSE_CUT_STATION; physics.structural_crush)
-    import bodies
-
-    from crashdem.glider import NOSE_CUT_STATION
-
-    _, nose = bodies.split_nose(spec, NOSE_CUT_STATION, bodies.GliderBuildUp().laminate_areal_density)
+    _, nose = bodies.split_nose(spec, NOSE_CUT_STATION,
+                                bodies.GliderBuildUp().laminate_areal_density)
     soil_vals["nose_mass_fraction"] = float(nose.mass) / float(spec.mass)
     soil_vals.update(_physics_values(scen))
     mu = math.tan(math.radians(min(gl["skin_friction_deg"],
@@ -211,21 +209,16 @@ def _channel_map(specs: list[str] | None, rec: dict[str, Signal],
     ``rear_accel_z`` / ``pitch_rate``; other names need ``--channel NAME:accel_x``."""
     out: dict[str, str] = {}
     models = PLANAR_CHANNELS if planar else (ACCEL, VELOCITY)
-    if not specs and planar:
-        for model in PLANAR_CHANNELS:
-            name = model if model in rec else sim_channel(rec, model)
+    if not specs:
+        find = sim_channel if planar else _auto_channel
+        for model in models:
+            name = model if model in rec else find(rec, model)
             if name is not None and name not in out:
                 out[name] = model
-        if "accel_x" not in out.values():
+        if planar and PLANAR_CHANNELS[0] not in out.values():
             raise ValueError(f"diagnose: no recorded channel found for 'accel_x' (the glider's "
                              f"longitudinal acceleration; also looked for 'rear_accel_x'); "
                              f"recorded: {sorted(rec)}; map one with --channel NAME:accel_x")
-        return out
-    if not specs:
-        for model in (ACCEL, VELOCITY):
-            name = model if model in rec else _auto_channel(rec, model)
-            if name is not None and name not in out:
-                out[name] = model
         if not out:
             raise ValueError(f"diagnose: no recorded channel found for {ACCEL!r} (an acceleration "
                              f"along z) or {VELOCITY!r}; recorded: {sorted(rec)} with units "
@@ -266,7 +259,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
                             {**raw[name].meta, "recorded_name": name})
            for name, rom_name in cmap.items()}
     # primary channel first (the longitudinal acceleration of the glider, the drop's vertical)
-    primary = "accel_x" if planar else ACCEL
+    primary = PLANAR_CHANNELS[0] if planar else ACCEL
     rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != primary))
     first = next(iter(rec.values()))
     cat_kw: dict[str, Any] = {}
@@ -373,18 +366,13 @@ def _share_packings(source: str, run_dirs: list[Path]) -> None:
     in process) to the baseline run's (``<baseline dir>/packings``) when it does not exist yet."""
     if not (source.startswith("full run ") or source.startswith("full result ")):
         return
+    from crashdem.run import share_packings
+
     base = Path(source.split(" ", 2)[2]).parent / "packings"
     if not base.is_dir():
         return
     for d in run_dirs:
-        link = d / "packings"
-        if link.exists() or link.is_symlink():
-            continue
-        try:
-            d.mkdir(parents=True, exist_ok=True)
-            link.symlink_to(base.resolve(), target_is_directory=True)
-        except OSError:  # no symlinks on this file system: the runs deposit their own bed
-            pass
+        share_packings(d, base)
 
 
 #: simulation channels that stand for each model channel when the recording's names differ
@@ -447,15 +435,17 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
     if got is None:
         raise ValueError(f"diagnose: the baseline run {path} has none of the diagnosed channels "
                          f"{sorted(cmap)} (nor {sorted(sum(SIM_CHANNELS.values(), ()))}); map them with "
-                         "--channel NAME:accel_z")
+                         f"--channel NAME:{next(iter(cmap.values()))}")
     return got, f"full run {path}"
 
 
-def _result_channels(path: Path, cmap: dict[str, str]) -> dict[str, Signal | None]:
-    """The diagnosed channels (CFC-filtered as written) of a crashdem result file, by model
-    channel name (None where missing). Only these channels are read: another channel of the
-    run may legitimately hold NaN (an accelerometer marked failed past its full scale, e.g. the
-    glider's nose pair), which must not make the run unusable."""
+def _result_channels(path: Path, cmap: dict[str, str],
+                     filtered: bool = True) -> dict[str, Signal | None]:
+    """The diagnosed channels of a crashdem result file (CFC-filtered as written, or raw), by
+    model channel name (None where missing): the recorded name, else the simulation channel
+    standing for the model channel (``sim_channel``). Only these channels are read: another
+    channel of the run may legitimately hold NaN (an accelerometer marked failed past its full
+    scale, e.g. the glider's nose pair), which must not make the run unusable."""
     from crashdem.results import open_result
 
     res = open_result(Path(path))
@@ -466,7 +456,7 @@ def _result_channels(path: Path, cmap: dict[str, str]) -> dict[str, Signal | Non
             if n is None:
                 out[rom_name] = None
                 continue
-            s = res.channel(n, filtered=True)
+            s = res.channel(n, filtered=filtered)
             out[rom_name] = Signal(rom_name, np.asarray(s.t), np.asarray(s.data), s.unit, s.cfc,
                                    {**s.meta, "recorded_name": n})
         return out
@@ -481,21 +471,10 @@ def _baseline_raw(source: str, cmap: dict[str, str]) -> dict[str, Signal] | None
     if not (source.startswith("full run ") or source.startswith("full result ")):
         return None
     try:
-        from crashdem.results import open_result
-
-        res = open_result(Path(source.split(" ", 2)[2]))
+        got = _result_channels(Path(source.split(" ", 2)[2]), cmap, filtered=False)
     except (ImportError, OSError, ValueError, KeyError):
         return None
-    try:
-        out: dict[str, Signal] = {}
-        for name, rom_name in cmap.items():
-            for n in (name, sim_channel(res, rom_name)):
-                if n is not None and n in res:
-                    out[rom_name] = res.channel(n, filtered=False)
-                    break
-        return out or None
-    finally:
-        res.close()
+    return {k: v for k, v in got.items() if v is not None} or None
 
 
 def _apply_scales(scen, scales: dict[str, float]) -> dict[str, Any]:

@@ -211,18 +211,11 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
         except (OSError, KeyError, ValueError):
             pass
     from crashdem.results import open_result
-    from crashdem.run import run_scenario
+    from crashdem.run import run_scenario, share_packings
 
     runs = store / "runs"
     runs.mkdir(parents=True, exist_ok=True)
-    pk = root / "packings"
-    pk.mkdir(parents=True, exist_ok=True)
-    link = runs / "packings"
-    if not link.exists():
-        try:
-            link.symlink_to(pk, target_is_directory=True)
-        except OSError:
-            pass
+    share_packings(runs, root / "packings")
     ov["scenario.name"] = f"diag_{key}"
     scen = sc.load(SCENARIO, ov)
     path = run_scenario(scen, out_dir=runs, progress=False)

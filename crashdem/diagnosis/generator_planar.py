@@ -21,8 +21,8 @@ Base: ``GLIDER_BASE`` = ``cli.planar_from_scenario`` of ``validation/scenarios/g
 (the reference glider and container; ``tests/crashdem/diagnosis/test_concealed_glider.py``
 checks that the two agree): 343 kg, pitch inertia 230 kg m^2, nose sphere of 0.30 m (half the
 fuselage width) 1.96 m ahead of the CG, a crushable nose of 0.86 % of the mass (the full
-model's nose cone ahead of ``glider.NOSE_CUT_STATION``), rear accelerometer 5 cm ahead of and 0.31 m below the
-CG, rear wall 1.56 m ahead of the first contact (plate stiffness 2.2 MN/m).
+model's nose cone ahead of ``glider.NOSE_CUT_STATION``), rear accelerometer 5 cm ahead of and
+0.31 m below the CG, rear wall 1.56 m ahead of the first contact (plate stiffness 2.2 MN/m).
 """
 from __future__ import annotations
 
@@ -31,7 +31,8 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from crashdem.diagnosis.generator import PRE_TRIGGER, TRIGGER_JITTER, acquire_samples, draw_effect
+from crashdem.diagnosis.generator import (EFFECT_DRAWS, PRE_TRIGGER, TRIGGER_JITTER,
+                                          acquire_samples, draw_effect)
 from crashdem.diagnosis.rom import SCALE_KEYS, RomParams, RomSettings
 from crashdem.diagnosis.rom_planar import PlanarParams, run_planar_raw, simulate_planar
 from crashdem.signal import Signal
@@ -57,14 +58,14 @@ RECORD_END = 0.25
 RAW_NOISE_PLANAR = {"accel_x": 0.5 * 9.80665, "accel_z": 0.5 * 9.80665,
                     "pitch_rate": math.radians(0.5)}
 
-#: effect -> {parameter: (low, high, "lin"|"log")}; ranges visible above the noise
+#: effect -> {parameter: (low, high, "lin"|"log")}; ranges visible above the noise. The soil
+#: and sensor effects draw what the drop truth draws (``generator.EFFECT_DRAWS``); the wall,
+#: the crush (the glider's soil peak is ~100 kN, not the drop's ~600 kN) and the attitude are
+#: the glider's own
 PLANAR_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
     "boundary_proximity": {"wall_distance": (0.85, 1.15, "lin")},
-    "cohesion": {"cohesion": (3.0e4, 8.0e4, "log")},
-    "particle_rotation": {"friction_ratio": (0.4, 0.6, "lin"),
-                          "mobilisation_depth": (0.05, 0.15, "log")},
-    "contact_damping": {"restitution": (0.05, 0.2, "lin")},
-    "sensor_dynamics": {"mount_frequency": (40.0, 90.0, "log"), "mount_damping": (0.05, 0.15, "lin")},
+    **{e: EFFECT_DRAWS[e] for e in ("cohesion", "particle_rotation", "contact_damping",
+                                    "sensor_dynamics")},
     "structural_crush": {"crush_strength": (4.0e4, 8.0e4, "log"), "crush_stroke": (0.1, 0.25, "lin")},
     "initial_conditions": {"pitch_offset": (0.06, 0.12, "lin")},  # sign drawn separately
 }

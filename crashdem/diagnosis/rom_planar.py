@@ -176,7 +176,7 @@ def _run_planar(p, mass, inertia, d, h, slope, gamma, theta0, mu, dt, n_steps, w
         vn = vcx * nx + vcz * nz
         fn, fs = _k._soil_update(delta, vn, fs, dt, t, p)
         vt = vcx * tx + vcz * tz
-        ft = -mu * (fn if fn > 0.0 else 0.0) * math.tanh(vt / 0.05)
+        ft = -mu * (fn if fn > 0.0 else 0.0) * math.tanh(vt / FRICTION_V_REG)
         fx = -fn * nx + ft * tx
         fz = -fn * nz + ft * tz
         if wall:

@@ -100,8 +100,6 @@ def test_cli_rom_baseline_filter_class(tmp_path):
     """``crashdem diagnose --baseline rom`` on a CSV recording filtered at CFC 180 that does not
     say so: the class is measured and the ROM baseline is compared at it (its raw channels are
     simulated), named ``sensor_dynamics`` with the class."""
-    from dataclasses import replace
-
     from crashdem import recordings
     from crashdem.diagnosis.generator import acquire
 
