@@ -420,8 +420,10 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
     d0 = float(base.wall_distance) if math.isfinite(base.wall_distance) else 4.0
     k0 = float(base.wall_stiffness)
     # the wall's basin is narrow (the second peak's timing): 24 grid levels over at most
-    # 1.25 x the modelled distance
+    # 1.25 x the modelled distance; the range reaches below the nominal 0.75 x it however near
+    # the modelled wall is
     d_hi = max(2.0, 1.25 * d0)
+    d_lo = min(0.2, 0.5 * d0)
 
     def wall_to_scen(v: dict[str, float]) -> dict[str, Any]:
         out: dict[str, Any] = {}
@@ -449,7 +451,7 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
                 ("The container's rear wall nearer than modelled or of another compliance: the "
                  "nose reaches it and a second longitudinal peak appears (thesis section 2.4); "
                  "penalty contact of the nose on a vertical wall."),
-                (ParameterSpec("wall_distance", "m", 0.2, d_hi, 0.75 * d0, "lin",
+                (ParameterSpec("wall_distance", "m", d_lo, d_hi, 0.75 * d0, "lin",
                                "horizontal distance from the first contact point to the rear "
                                "wall", None, off=d0, grid=24),
                  ParameterSpec("wall_stiffness", "N/m", k0 / 30.0, k0 * 30.0, k0, "log",

@@ -120,3 +120,17 @@ def test_mount_offset_channel_integrates_to_the_pitch_rate():
     integ = np.concatenate([[0.0], np.cumsum(fz1[1:] - fz0[1:]) * s.dt / big_l])
     assert np.max(np.abs(integ - w)) < 1e-6 * np.max(np.abs(w)) + 1e-9
     assert np.max(np.abs(w)) > 1.0  # the body does rotate
+
+
+@pytest.mark.parametrize("distance", [0.1, 1.56, math.inf])
+def test_planar_catalogue_wall_range_holds_the_modelled_wall(distance):
+    """The rear-wall hypothesis nests the baseline for any modelled wall: its ``off`` value is
+    the modelled distance (4 m, out of reach, without a wall) and both it and the nominal lie in
+    the search range (a wall 0.1 m ahead used to raise a ParameterSpec error)."""
+    from crashdem.diagnosis.catalogue import planar_catalogue
+
+    wall = planar_catalogue(PlanarParams(wall_distance=distance)).get("boundary_proximity")
+    d = wall.parameters[0]
+    assert d.name == "wall_distance"
+    assert d.off == (distance if math.isfinite(distance) else 4.0)
+    assert d.lo <= d.nominal < d.off <= d.hi
