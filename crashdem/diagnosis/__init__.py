@@ -407,17 +407,19 @@ def _sign_convention(rec: dict[str, Signal], base: dict[str, Signal], channels: 
     return out, info
 
 
-def measured_impact_speed(acc: Signal, vel: Signal, noise_vel: NoiseEstimate,
+def measured_impact_speed(acc: Signal | None, vel: Signal, noise_vel: NoiseEstimate,
                           sigma_acc: float, gravity: float = 9.81) -> dict[str, Any] | None:
     """Impact speed read from the recording's free-fall velocity before the onset.
 
     Before contact ``v_z(t) = -v_imp - g (t - t_on)``: the mean of ``v_z + g (t - t_on)`` over
-    the quiet pre-event segment (ending ``PRE_ONSET`` before the acceleration onset ``t_on``) is
-    ``-v_imp``. Uncertainty: the velocity noise over the segment's independent samples and the
-    onset timing (``IMPACT_ONSET_TIMING`` x g). None without a quiet segment of 8 samples.
+    the quiet pre-event segment (ending ``PRE_ONSET`` before the acceleration onset ``t_on``;
+    without an acceleration channel, the onset of the velocity's derivative) is ``-v_imp``.
+    Uncertainty: the velocity noise over the segment's independent samples and the onset timing
+    (``IMPACT_ONSET_TIMING`` x g). None without a quiet segment of 8 samples.
     """
-    a_s, v_s = acc.to_si(), vel.to_si()
-    t_on = onset_time(a_s, sigma_acc)
+    v_s = vel.to_si()
+    a_s = acc.to_si() if acc is not None else v_s
+    t_on = onset_time(a_s, sigma_acc if acc is not None else noise_vel.sigma)
     w = v_s.t <= t_on - PRE_ONSET
     if noise_vel.window:
         w &= v_s.t >= noise_vel.window[0]
@@ -720,11 +722,13 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     sensor_found = bool(check.get("detected")) and "sensor_dynamics" in names
     v_nom = impact_speed if impact_speed is not None else (rom_base.v0 if rom_base else None)
     speed: dict[str, Any] | None = None
-    if v_nom is not None and VELOCITY in channels and ACCEL in rec:
+    if v_nom is not None and VELOCITY in channels:
         # on the channels as recorded (a channel filtered here would smear the contact into
         # the free fall)
-        speed = measured_impact_speed(rec_given[ACCEL], rec_given[VELOCITY],
-                                      noise_given[VELOCITY], noise_given[ACCEL].sigma)
+        has_acc = ACCEL in rec_given and ACCEL in noise_given
+        speed = measured_impact_speed(rec_given[ACCEL] if has_acc else None,
+                                      rec_given[VELOCITY], noise_given[VELOCITY],
+                                      noise_given[ACCEL].sigma if has_acc else 0.0)
         if speed is not None:
             speed.update(nominal=float(v_nom), offset=speed["impact_speed"] - float(v_nom))
             if not abs(speed["offset"]) < 0.5 * float(v_nom):

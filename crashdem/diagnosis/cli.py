@@ -178,15 +178,18 @@ def _si_unit(unit: str | None) -> str | None:
     return UNIT_TO_SI.get(unit, (None, None))[1] if unit else None
 
 
-def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
-    """The recorded channel standing for ``model`` (``accel_z`` / ``velocity_z``) when the
-    recording does not use crashdem's names: crashdem's impactor channel, an ISO/TS 13499 code
-    (dimension ``AC``/``VE``, direction ``Z``), or the one channel with the right SI unit whose
-    name says z. None when nothing or more than one channel qualifies."""
-    si, iso = ("m/s^2", "AC") if model == ACCEL else ("m/s", "VE")
-    alt = sim_channel(rec, model)
-    if alt is not None:
-        return alt
+#: what a drop channel may be recorded as: (SI unit, ISO/TS 13499 dimension) in order of
+#: preference; a force is the contact force on the impactor (divided by its mass), a length its
+#: position or penetration (differentiated), see ``_convert``
+_RECORDED_AS: dict[str, tuple[tuple[str, str], ...]] = {
+    ACCEL: (("m/s^2", "AC"), ("N", "FO")),
+    VELOCITY: (("m/s", "VE"), ("m", "DS")),
+}
+
+
+def _unit_channel(rec: dict[str, Signal], si: str, iso: str) -> str | None:
+    """The one recorded channel with ISO/TS 13499 dimension ``iso`` along Z, else the one with
+    SI unit ``si``, else the one of those whose name ends in z; None otherwise."""
     iso_hits = [n for n in rec if len(n) == 16 and n[12:14].upper() == iso
                 and n[14].upper() == "Z"]
     if len(iso_hits) == 1:
@@ -196,6 +199,50 @@ def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
         return unit_hits[0]
     z_hits = [n for n in unit_hits if n.lower().rstrip("_0123456789").endswith("z")]
     return z_hits[0] if len(z_hits) == 1 else None
+
+
+def _auto_channel(rec: dict[str, Signal], model: str) -> str | None:
+    """The recorded channel standing for ``model`` (``accel_z`` / ``velocity_z``) when the
+    recording does not use crashdem's names: crashdem's impactor channel, an ISO/TS 13499 code
+    (dimension ``AC``/``VE``, direction ``Z``), or the one channel with the right SI unit whose
+    name says z. Failing those, another code's output: a contact force [N] on the impactor for
+    ``accel_z`` (ISO ``FO``), a position or penetration [m] for ``velocity_z`` (ISO ``DS``),
+    converted by ``_convert``. None when nothing or more than one channel qualifies."""
+    alt = sim_channel(rec, model)
+    if alt is not None:
+        return alt
+    for si, iso in _RECORDED_AS[model]:
+        hit = _unit_channel(rec, si, iso)
+        if hit is not None:
+            return hit
+    return None
+
+
+def _convert(sig: Signal, model: str, mass: float | None) -> tuple[Signal, str | None]:
+    """A recorded channel as the model channel ``model``, and how it was converted (None: as
+    recorded). A force [N, kN] standing for ``accel_z`` is divided by the impactor's mass (the
+    contact force on the body over its mass is the specific force an accelerometer on it reads;
+    a force that includes the weight reads -g in free fall, like a kinematic acceleration, and
+    is handled as that); a position or penetration [m, mm] standing for ``velocity_z`` is
+    differentiated (central differences; its sign is settled by the sign-convention check).
+    Any other unit is an error naming the channel, its unit and the units accepted."""
+    from crashdem.signal import to_si
+
+    si = _si_unit(sig.unit)
+    allowed = _RECORDED_AS.get(model, ((None, None),))
+    if si == allowed[0][0] or model not in _RECORDED_AS:
+        return sig, None
+    if model == ACCEL and si == "N" and mass:
+        data, _ = to_si(sig.data, sig.unit)
+        return (Signal(sig.name, sig.t, data / mass, "m/s^2", sig.cfc, dict(sig.meta)),
+                f"contact force [{sig.unit}] / impactor mass {mass:g} kg")
+    if model == VELOCITY and si == "m":
+        data, _ = to_si(sig.data, sig.unit)
+        return (Signal(sig.name, sig.t, np.gradient(data, sig.t), "m/s", sig.cfc, dict(sig.meta)),
+                f"time derivative of the recorded length [{sig.unit}]")
+    units = " or ".join(u for u, _ in allowed)
+    raise ValueError(f"--channel {sig.name}:{model}: the channel's unit {sig.unit!r} cannot stand "
+                     f"for {model!r}; allowed: a unit convertible to {units}")
 
 
 def _channel_map(specs: list[str] | None, rec: dict[str, Signal],
@@ -255,9 +302,14 @@ def diagnose_command(args: argparse.Namespace) -> int:
     base_params = rom_from_scenario(scen)
     planar = isinstance(base_params, PlanarParams)
     cmap = _channel_map(getattr(args, "channel", None), raw, planar)
-    rec = {rom_name: Signal(rom_name, raw[name].t, raw[name].data, raw[name].unit, raw[name].cfc,
-                            {**raw[name].meta, "recorded_name": name})
-           for name, rom_name in cmap.items()}
+    rec: dict[str, Signal] = {}
+    conversions: dict[str, str] = {}
+    for name, rom_name in cmap.items():
+        sig, how = _convert(raw[name], rom_name, None if planar else base_params.mass)
+        meta = {**sig.meta, "recorded_name": name}
+        if how is not None:
+            meta["converted"] = conversions[rom_name] = how
+        rec[rom_name] = Signal(rom_name, sig.t, sig.data, sig.unit, sig.cfc, meta)
     # primary channel first (the longitudinal acceleration of the glider, the drop's vertical)
     primary = PLANAR_CHANNELS[0] if planar else ACCEL
     rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != primary))
@@ -313,6 +365,8 @@ def diagnose_command(args: argparse.Namespace) -> int:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
                        baseline_raw=base_raw, **cat_kw)
     rep.simulations["baseline_source"] = source
+    rep.fit["recorded_channels"] = {rom: {"recorded": name, "converted": conversions.get(rom)}
+                                    for name, rom in cmap.items()}
     paths = write_report(rep, args.out)
     print(paths["json"])
     print(paths["md"])

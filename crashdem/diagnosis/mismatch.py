@@ -178,7 +178,15 @@ def _estimate_noise(sig: Signal, quiet: tuple[float, float] | None = None) -> No
 
 
 def onset_time(sig: Signal, sigma: float) -> float:
-    """First time [s] the channel leaves its initial level by more than the onset threshold."""
+    """First time [s] the channel leaves its initial level by more than the onset threshold.
+
+    A velocity channel (unit ``m/s``) is a ramp before the event (free fall), so its onset is
+    that of its time derivative (constant -g, or +g, before the event), with the derivative's
+    own noise from the pre-event segment when ``sigma`` > 0 (a recorded channel) and 0 else (a
+    simulated one)."""
+    if sig.unit == "m/s" and sig.t.size >= 3:
+        d = Signal(sig.name, sig.t, np.gradient(sig.data, sig.t), "m/s^2", sig.cfc, sig.meta)
+        return onset_time(d, estimate_noise(d).sigma if sigma > 0.0 else 0.0)
     x = sig.data
     n0 = max(3, min(MIN_QUIET_SAMPLES, x.size // 10))
     base = float(np.median(x[:n0]))

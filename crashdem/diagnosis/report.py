@@ -55,6 +55,13 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
     lines += [f"**Missing physics:** {mp if mp else 'none claimed'}  ",
               f"**Best explanation:** {d['best'] or 'baseline (within noise)'}  ",
               f"**Decision:** {d['decision']}", ""]
+    conv = fit.get("recorded_channels")
+    if conv:
+        lines += ["## Recorded channels", "", "| model channel | recorded as | conversion |",
+                  "|---|---|---|"]
+        lines += [f"| {ch} | {c['recorded']} | {c['converted'] or 'none'} |"
+                  for ch, c in conv.items()]
+        lines.append("")
     lines += ["## Noise of the recording", "", "| channel | sigma | unit | method |", "|---|---|---|---|"]
     for ch, n in d["noise"].items():
         lines.append(f"| {ch} | {_fmt(n['sigma'])} | {n['unit']} | {n['method']} |")

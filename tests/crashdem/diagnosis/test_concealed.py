@@ -189,6 +189,25 @@ def test_impact_speed_measured_from_the_free_fall(offset):
         assert h["parameters"]["speed_offset"] == pytest.approx(offset, rel=0.02)
 
 
+@pytest.mark.parametrize("offset", [-3.0, 2.2])
+def test_impact_speed_measured_from_a_velocity_alone(offset):
+    """A recording holding only the impactor velocity (no accelerometer): the onset is that of
+    the velocity's derivative, the speed offset is read from the free fall before it (within
+    0.05 m/s of the truth) and named; without the velocity-derivative onset the velocity ramp
+    of the free fall read as the event and misaligned the baseline by ~50 ms."""
+    from crashdem.diagnosis.generator import acquire
+
+    rec = acquire(RomParams(speed_offset=offset), np.random.default_rng(8),
+                  trigger_offset=-0.0015)
+    rep = diagnose(simulate(RomParams()), {"velocity_z": rec["velocity_z"]},
+                   impact_speed=RomParams().v0)
+    chk = rep.fit["impact_speed_check"]
+    assert chk["used"] and chk["offset"] == pytest.approx(offset, abs=0.05)
+    assert rep.missing_physics == "initial_conditions", rep.decision
+    assert rep.fit["before"]["per_channel"]["velocity_z"]["timing_error_s"] == pytest.approx(
+        0.0, abs=0.01)
+
+
 def test_impact_speed_of_another_unit_is_not_used():
     """A velocity in another unit than it says (km/h labelled m/s) gives a 'recorded impact
     speed' far from the baseline's: it is reported with the reason and not used as a speed

@@ -171,6 +171,69 @@ def test_channel_map_finds_channels_of_other_codes():
         _channel_map(None, {"a1": s("g"), "a2": s("g")})
 
 
+def test_channel_map_reads_force_and_position_of_other_codes():
+    """Another DEM code writes the contact force on the impactor and its position rather than
+    an acceleration and a velocity: without an acceleration, a unique force channel (unit N/kN,
+    or ISO dimension FO along Z) stands for ``accel_z`` and is divided by the impactor mass;
+    without a velocity, a unique length channel (m/mm, or ISO DS along Z) stands for
+    ``velocity_z`` and is differentiated. A channel whose unit cannot stand for its model
+    channel is an error naming the channel, its unit and the units accepted."""
+    from crashdem.diagnosis.cli import _channel_map, _convert
+    from crashdem.signal import Signal
+
+    t = np.linspace(0.0, 0.1, 101)
+
+    def s(unit, data=None, name="x"):
+        return Signal(name, t, np.zeros_like(t) if data is None else data, unit, None, {})
+
+    assert _channel_map(None, {"Fz": s("kN"), "z": s("m")}) == {"Fz": "accel_z", "z": "velocity_z"}
+    assert _channel_map(None, {"10SPHE0000CGFOZD": s("N"), "10SPHE0000CGFOXD": s("N"),
+                               "10SPHE0000CGDSZD": s("mm")}) == {
+        "10SPHE0000CGFOZD": "accel_z", "10SPHE0000CGDSZD": "velocity_z"}
+    # an acceleration or velocity present is preferred to a force or position
+    assert _channel_map(None, {"a": s("g"), "F": s("N"), "z": s("m")}) == {
+        "a": "accel_z", "z": "velocity_z"}
+    # conversions: 1.7 kN on 850 kg is 2 m/s^2; z = 3 - 5 t^2 [mm] gives v = -10 t mm/s
+    a, how = _convert(s("kN", np.full_like(t, 1.7)), "accel_z", 850.0)
+    assert a.unit == "m/s^2" and np.allclose(a.data, 2.0) and "850 kg" in how
+    v, how = _convert(s("mm", 3.0 - 5.0 * t**2), "velocity_z", 850.0)
+    assert v.unit == "m/s" and np.allclose(v.data[1:-1], -0.01 * t[1:-1]) and "derivative" in how
+    same, how = _convert(s("g"), "accel_z", 850.0)
+    assert how is None and same.unit == "g"
+    with pytest.raises(ValueError, match=r"p:accel_z.*'Pa'.*m/s\^2 or N"):
+        _convert(s("Pa", name="p"), "accel_z", 850.0)
+    with pytest.raises(ValueError, match=r"v:velocity_z.*'g'.*m/s or m"):
+        _convert(s("g", name="v"), "velocity_z", 850.0)
+
+
+def test_cli_diagnoses_a_force_and_penetration_recording(tmp_path):
+    """A recording as another code would write it -- contact force [kN] and penetration [mm],
+    positive down, no acceleration or velocity -- diagnosed by the CLI: the speed offset of the
+    truth (-2.5 m/s) is named, its value within 2 % (read from the differentiated free fall),
+    and the report says how each model channel was obtained."""
+    from crashdem import recordings
+    from crashdem.diagnosis.generator import acquire
+    from crashdem.signal import Signal
+    from scipy.integrate import cumulative_trapezoid
+
+    rec = acquire(RomParams(speed_offset=-2.5), np.random.default_rng(14))
+    a, v = rec["accel_z"], rec["velocity_z"]
+    force = Signal("F_contact", a.t, a.data * RomParams().mass / 1e3, "kN", a.cfc)
+    pen = Signal("penetration", v.t, -1e3 * cumulative_trapezoid(v.data, v.t, initial=0.0),
+                 "mm", v.cfc)
+    rec_path = recordings.write_recording(tmp_path / "rec.csv", [force, pen])
+    rc, d = _cli_rom_diagnose(tmp_path, rec_path)
+    assert rc == 0
+    assert d["missing_physics"] == "initial_conditions", d["decision"]
+    h = next(h for h in d["hypotheses"] if h["name"] == "initial_conditions")
+    assert h["parameters"]["speed_offset"] == pytest.approx(-2.5, rel=0.02)
+    conv = d["fit"]["recorded_channels"]
+    assert conv["accel_z"]["recorded"] == "F_contact" and "mass" in conv["accel_z"]["converted"]
+    assert conv["velocity_z"]["recorded"] == "penetration"
+    assert "derivative" in conv["velocity_z"]["converted"]
+    assert d["fit"]["sign_convention"]["velocity_z"]["flipped"]
+
+
 def test_confirmation_falls_back_to_local_runs_when_the_cluster_is_unusable():
     """A Dask simulator that cannot start (OSError) hands the batch to the in-process runner
     once and says why; a failed run (RuntimeError) is not masked."""
