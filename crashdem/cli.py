@@ -129,6 +129,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(default 3 with a full-simulation baseline: the recalibrated run and "
                         "the two best candidates; 0 = screening only; in parallel on Dask: a "
                         "LocalCluster, or --scheduler; --workers 0 runs them in this process)")
+    d.add_argument("--full-search", choices=("auto", "full", "coarse", "off"), default="auto",
+                   help="run each soil effect at levels of its main parameter in the full DEM "
+                        "(its own terms, e.g. contact cohesion) before naming one: on the "
+                        "scenario itself (full), on the scenario at 0.10 m grains in a 2 m tank "
+                        "with the leading levels confirmed at the scenario's resolution "
+                        "(coarse), auto = coarse when the scenario is finer, off = none")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

@@ -25,7 +25,7 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -44,7 +44,7 @@ from crashdem.diagnosis.sensor_check import accel_velocity_check
 from crashdem.signal import Signal
 
 __all__ = ["Report", "confirm", "diagnose", "screen_then_confirm", "write_report", "catalogue",
-           "CATALOGUE", "RECALIBRATION"]
+           "CATALOGUE", "RECALIBRATION", "working_rate", "MAX_SAMPLE_RATE"]
 
 Simulator = Callable[[dict[str, Any]], Mapping[str, Signal]]
 
@@ -52,6 +52,13 @@ Simulator = Callable[[dict[str, Any]], Mapping[str, Signal]]
 ROM_CHANNELS = ("accel_z", "velocity_z")
 #: a full simulation must raise the overall score over the baseline by this much to confirm
 CONFIRM_MIN_GAIN = 0.02
+#: two decisive full runs of different effects within this Delta BIC of each other are not
+#: told apart (Kass & Raftery 1995: 0-2 is "not worth more than a bare mention"); neither is
+#: named unless the screening claimed one of them
+AMBIGUITY_MARGIN = 2.0
+#: full-model search on a separate (cheaper) simulator: this many leading effects that beat
+#: its baseline decisively are run with the full simulator
+SEARCH_PROMOTE = 2
 #: weighted residual RMS [sigma] left by the accepted effect above which combinations of two
 #: effects are tried (single-effect fits of the validation end below 3 sigma: model error)
 SECOND_STAGE_RMS = 4.0
@@ -148,6 +155,36 @@ def _uniform(signals: Mapping[str, Signal]) -> tuple[dict[str, Signal], dict[str
                         {**s.meta, "resampled": f"non-uniform -> {1.0 / med:.6g} Hz"})
         info[k] = {"from_samples": int(s.t.size), "to_samples": int(n), "rate_hz": 1.0 / med,
                    "max_interval_deviation": dev}
+    return out, info
+
+
+#: highest sample rate the diagnosis works at [Hz]: the screening models integrate at
+#: ``RomSettings.dt`` = 20 us and sample at most every second step (25 kHz; 20 kHz keeps a
+#: margin). A recording sampled faster (a DEM code's output every few steps, a 100 kHz+
+#: acquisition) is decimated to ``fs / ceil(fs / MAX_SAMPLE_RATE)``; J211 asks for 10 x CFC,
+#: i.e. 10 kHz for CFC 1000
+MAX_SAMPLE_RATE = 20_000.0
+
+
+def working_rate(signals: Mapping[str, Signal]) -> tuple[dict[str, Signal], dict[str, Any]]:
+    """Channels sampled above ``MAX_SAMPLE_RATE`` decimated by the smallest integer factor q
+    that brings them to or below it (``scipy.signal.resample_poly``: zero-phase Kaiser FIR
+    anti-aliasing; the record's ends are padded along their line, so a free-fall ramp keeps no
+    edge transient). Others are returned unchanged. Returns the channels and
+    ``{name: {"from_rate_hz", "to_rate_hz", "factor"}}``."""
+    from scipy.signal import resample_poly
+
+    out, info = {}, {}
+    for k, s in signals.items():
+        if s.t.size < 3 or s.fs <= MAX_SAMPLE_RATE * (1.0 + UNIFORM_TOLERANCE):
+            out[k] = s
+            continue
+        q = int(math.ceil(s.fs / MAX_SAMPLE_RATE - UNIFORM_TOLERANCE))
+        y = resample_poly(s.data, 1, q, padtype="line")
+        t = s.t[::q][: y.size]
+        out[k] = Signal(s.name, t, y[: t.size], s.unit, s.cfc,
+                        {**s.meta, "decimated": f"{s.fs:.6g} Hz / {q}"})
+        info[k] = {"from_rate_hz": float(s.fs), "to_rate_hz": float(s.fs) / q, "factor": q}
     return out, info
 
 
@@ -597,6 +634,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     if anchor_index not in ("time", "depth"):
         raise ValueError(f"anchor_index={anchor_index!r}: must be 'time' or 'depth'")
     rec, resampled = _uniform(_si(recording_signals))
+    rec, decimated = working_rate(rec)
     base = _si(baseline_signals)
     planar = simulator is None and isinstance(rom_base, PlanarParams)
     if catalog is not None:
@@ -918,6 +956,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "filter_class": fclass,
         "sign_convention": signs,
         "resampled": resampled,
+        "decimated": decimated,
         "second_stage": second_stage,
     }
     # residual diagnostics of the final explanation: a residual much more correlated than the
@@ -948,6 +987,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
 def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         recording_signals: Mapping[str, Signal],
                         full_simulator: Simulator, *, top_k: int = 2,
+                        full_search: bool | Mapping[str, catalogue.FullSearch] = True,
+                        search_simulator: Simulator | None = None,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -959,6 +1000,16 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         when it has a ``map(list_of_overrides) -> list_of_signals`` method (e.g.
         ``distributed.DaskFullSimulator``) the runs are requested as one batch
     top_k : number of missing-physics hypotheses confirmed (each costs one full simulation)
+    full_search : also run, unless a model-free sensor answer stands, every effect of the
+        catalogue's ``full_search`` (or of the mapping given) at its levels in the full model's
+        own terms (``catalogue.FullSearch``; drop: 22 runs) plus one refinement run of the
+        leading effect; each effect is then judged by its best run
+    search_simulator : run the search on this cheaper simulator instead (e.g. the scenario at
+        a coarser resolution), each run anchored on the baseline simulation (baseline + its
+        change against the search simulator's own baseline run, ``{}``); the best level of each
+        of the ``SEARCH_PROMOTE`` leading effects that beat the baseline decisively is then run
+        with ``full_simulator`` and judged like any candidate, in the place of the screened
+        candidates other than the screening's claim (the full runs stay 1 + ``top_k``)
     diagnose_kw : passed to :func:`diagnose`
 
     Returns
@@ -974,7 +1025,11 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     worse than the reference by more than ``ACCEPT_MARGIN`` in BIC; another candidate replaces
     it (or is named when the screening claimed nothing) when its full run beats the reference by
     ``ACCEPT_MARGIN`` in BIC and ``CONFIRM_MIN_GAIN`` in score, and beats the claim's full run
-    by ``CONFIRM_MIN_GAIN`` in score.
+    by ``CONFIRM_MIN_GAIN`` in score; among several such rivals the highest Delta BIC wins.
+    With ``full_search`` each effect's best run (screened value, search levels, refinement)
+    stands for it, and a named searched effect reports the full model's value of its main
+    parameter (``hypotheses[*].full_model``; it replaces the screening's value when both mean
+    the same, e.g. a floor or interface depth).
     """
     rep = diagnose(baseline_signals, recording_signals, **diagnose_kw)
     rec = rep.recording
@@ -992,80 +1047,186 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
 
     by_name = {h["name"]: h for h in rep.hypotheses}
     recal = by_name[RECALIBRATION.name]
-    requests = [(RECALIBRATION.name, RECALIBRATION.scenario_overrides(recal["recalibration"]))]
+    fclass = rep.fit.get("filter_class") or {}
+    # every full run is filtered at the recording's class (instrumentation.cfc), as the
+    # screening compared it
+    cfc_key = ({"instrumentation.cfc": float(fclass["class"])}
+               if fclass.get("mismatch") and fclass.get("class") is not None else {})
+    # a sensor found by the model-free accelerometer/velocity check (or the noise spectrum)
+    # needs no soil model: its full run only adds granular noise to the same conclusion
+    checked = (rep.missing_physics == "sensor_dynamics"
+               and (bool(rep.fit.get("sensor_check", {}).get("detected"))
+                    or bool(fclass.get("mismatch"))))
     unexplained = bool(rep.fit.get("recalibration_unexplained", False))
-    candidates = [h for h in rep.hypotheses if h["name"] != RECALIBRATION.name][:top_k] \
-        if (rep.missing_physics is not None or unexplained) else []
+    lacks = rep.catalogue.full_unsupported
+    skipped: dict[str, str] = {}
+    candidates: list[dict[str, Any]] = []
+    if rep.missing_physics is not None or unexplained:
+        for h in rep.hypotheses:
+            missing = [e for e in h["name"].split("+") if e in lacks]
+            if h["name"] == RECALIBRATION.name or len(candidates) == top_k:
+                continue
+            if missing:  # the full model cannot run it: the next candidate takes its place
+                skipped[h["name"]] = lacks[missing[0]]
+                continue
+            candidates.append(h)
+    # the search runs even when the recalibration explains the recording within the total
+    # error: the screening model's error floor can hide what the full model resolves
+    if checked or not full_search:
+        searched: dict[str, catalogue.FullSearch] = {}
+    elif isinstance(full_search, Mapping):
+        searched = dict(full_search)
+    else:
+        searched = dict(rep.catalogue.full_search)
+    allowed = diagnose_kw.get("hypotheses")
+    if allowed is not None:
+        searched = {k: v for k, v in searched.items() if k in allowed}
+    n_eff = float(rep.fit["n_effective"])
+    n_res = float(rep.fit["n_samples"])
+
+    def bic(rss: float, k: int) -> float:
+        return n_eff * math.log(max(rss, 1e-300) / n_res) + k * math.log(n_eff)
+
+    def row(name: str, ov: dict[str, Any], x: float | None, out: Any) -> dict[str, Any]:
+        r = (score(name, ov, out) if not isinstance(out, Exception) else
+             {"hypothesis": name, "overrides": ov, "score": -math.inf, "error": str(out)})
+        if x is not None:
+            r["search_value"] = x
+        if "aligned" in r:
+            r["rss"] = _full_rss(rep, r["aligned"])
+        return r
+
+    def levels(names: Sequence[str]) -> list[tuple[str, dict[str, Any], float]]:
+        return [(n, {**searched[n].overrides(x), **cfc_key}, float(x))
+                for n in names for x in searched[n].values]
+
+    def located(r: dict[str, Any]) -> bool:
+        """A scored run that can stand for its effect: not a search run at the end of the span
+        where the effect fades (``FullSearch.located``)."""
+        return "rss" in r and not ("search_value" in r and r["hypothesis"] in searched
+                                   and not searched[r["hypothesis"]].located(r["search_value"]))
+
+    def anchored(r: dict[str, Any], ref: dict[str, Any]) -> dict[str, Any]:
+        """Run ``r`` of another simulator as the baseline simulation plus its change against
+        that simulator's baseline run ``ref`` (both aligned on the recording)."""
+        if "aligned" not in r or "aligned" not in ref:
+            return r
+        al = {ch: Signal(ch, rep.baseline[ch].t, rep.baseline[ch].data + r["aligned"][ch].data
+                         - ref["aligned"][ch].data, rep.baseline[ch].unit, rep.baseline[ch].cfc)
+              for ch in chans}
+        per = {ch: score_signals(rec[ch], al[ch], tuple(rep.fit["score_window_s"]))
+               for ch in chans}
+        return {**r, "aligned": al, "per_channel": per, "anchored": True,
+                "score": float(np.mean([v["score"] for v in per.values()])),
+                "rss": _full_rss(rep, al)}
+
+    def refined(sim: Simulator, rws: list[dict[str, Any]],
+                qual: Callable[[dict[str, Any]], None]) -> list[dict[str, Any]]:
+        """One run of the leading searched effect at the vertex of the parabola through its
+        best level and the two neighbours (in the search coordinate), when interior."""
+        lead = _best_rows(r for r in rws if "search_value" in r and r["hypothesis"] in searched
+                          and located(r))
+        if not lead:
+            return []
+        top = max(lead.values(), key=lambda r: r["delta_bic_vs_reference"])
+        v = _search_vertex(top, rws, searched[top["hypothesis"]])
+        if v is None:
+            return []
+        name = top["hypothesis"]
+        ov = {**searched[name].overrides(v["value"]), **cfc_key}
+        extra = row(name, ov, v["value"], _run_full(sim, [(name, ov)])[0])
+        extra["refined"] = True
+        qual(extra)
+        return [extra]
+
+    t_full = time.perf_counter()
+    search_rows: list[dict[str, Any]] = []
+    promoted: list[tuple[str, dict[str, Any], float | None]] = []
+    if searched and search_simulator is not None:
+        # tier 1: every level on the cheaper search simulator, judged against that
+        # simulator's own baseline run; the leading effects' best levels go to the full model
+        s_req = [("baseline", dict(cfc_key), None)] + levels(list(searched))
+        s_out = _run_full(search_simulator, [(n, ov) for n, ov, _ in s_req])
+        if isinstance(s_out[0], Exception):
+            raise s_out[0]
+        raw_rows = [row(n, ov, x, o) for (n, ov, x), o in zip(s_req, s_out)]
+        s_ref = raw_rows[0]
+        # anchored like the screening: each search run predicts the baseline simulation plus
+        # the change its effect makes in the search simulator (its run minus that simulator's
+        # baseline run), so the search simulator's own misfit is not read as an effect
+        search_rows = [s_ref] + [anchored(r, s_ref) for r in raw_rows[1:]]
+        s_bic = bic(_full_rss(rep, rep.baseline), 0)
+
+        def s_qualify(r: dict[str, Any]) -> None:
+            if "rss" in r:
+                r["delta_bic_vs_reference"] = s_bic - bic(r["rss"], 1)
+
+        for r in search_rows[1:]:
+            s_qualify(r)
+        extra = [anchored(r, s_ref) for r in refined(search_simulator, search_rows,
+                                                     lambda r: None)]
+        for r in extra:
+            s_qualify(r)
+        search_rows += extra
+        best_s = _best_rows(r for r in search_rows[1:] if located(r))
+        s_score = float(rep.fit["before"]["overall"])
+        promote = sorted((r for r in best_s.values()
+                          if r["delta_bic_vs_reference"] > ACCEPT_MARGIN
+                          and r["score"] - s_score >= CONFIRM_MIN_GAIN),
+                         key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
+        # the full runs stay 1 + top_k: the screening's claim, then the promoted levels, then
+        # the other screened candidates
+        claim = [h for h in candidates if h["name"] == rep.missing_physics]
+        promote = promote[:max(0, top_k - len(claim))]
+        candidates = claim + [h for h in candidates if h["name"] != rep.missing_physics][
+            :max(0, top_k - len(claim) - len(promote))]
+        promoted = [(r["hypothesis"], dict(r["overrides"]), r["search_value"]) for r in promote]
+    requests: list[tuple[str, dict[str, Any], float | None]] = [
+        (RECALIBRATION.name, {**RECALIBRATION.scenario_overrides(recal["recalibration"]),
+                              **cfc_key}, None)]
     for h in candidates:
         # the effect alone on the baseline scenario: the screening model's recalibration
         # factors do not carry over to the full model's material parameters (measured on the
         # DEM: every full run with the mapped factors scored below the baseline), while the
         # effect parameters (depths, speeds, frequencies) have the same meaning in both
-        requests.append((h["name"], _confirmation_overrides(h, rep.catalogue)))
-    fclass = rep.fit.get("filter_class") or {}
-    if fclass.get("mismatch") and fclass.get("class") is not None:
-        # every full run is filtered at the recording's class (instrumentation.cfc), as the
-        # screening compared it
-        requests = [(n, {**ov, "instrumentation.cfc": float(fclass["class"])})
-                    for n, ov in requests]
-    t_full = time.perf_counter()
-    outs: list[Any] = []
-    if hasattr(full_simulator, "map"):
-        try:
-            batch = [ov for _, ov in requests]
-            outs = list(full_simulator.map(batch))  # type: ignore[attr-defined]
-        except (RuntimeError, ValueError):
-            # a run of the batch failed (e.g. a hypothesis the full model cannot represent):
-            # run them one by one so that the others can still be scored
-            outs = []
-    if not outs:
-        for name, ov in requests:
-            try:
-                outs.append(full_simulator(ov))
-            except (ValueError, RuntimeError) as e:  # the full model cannot run this hypothesis
-                if name == RECALIBRATION.name:
-                    raise
-                outs.append(e)
-    t_full = time.perf_counter() - t_full
-    rows = [score(name, ov, out) if not isinstance(out, Exception) else
-            {"hypothesis": name, "overrides": ov, "score": -math.inf, "error": str(out)}
-            for (name, ov), out in zip(requests, outs)]
+        requests.append((h["name"], {**_confirmation_overrides(h, rep.catalogue), **cfc_key},
+                         None))
+    requests += promoted
+    if searched and search_simulator is None:
+        requests += levels(list(searched))
+    outs = _run_full(full_simulator, [(n, ov) for n, ov, _ in requests])
+    rows = [row(n, ov, x, out) for (n, ov, x), out in zip(requests, outs)]
     recal_row = rows[0]
     # reference: the better of the baseline simulation and the recalibrated full run
     base_row = {"hypothesis": "baseline", "score": float(rep.fit["before"]["overall"]),
                 "aligned": rep.baseline}
-    for r in [base_row] + rows:
-        if "aligned" in r:
-            r["rss"] = _full_rss(rep, r["aligned"])
+    base_row["rss"] = _full_rss(rep, rep.baseline)
     ref_row = max([base_row, recal_row], key=lambda r: r["score"])
     reference = ref_row["score"]
-    n_eff = float(rep.fit["n_effective"])
-    n_res = float(rep.fit["n_samples"])
-
-    def bic(r, k):
-        return n_eff * math.log(max(r["rss"], 1e-300) / n_res) + k * math.log(n_eff)
-
     ref_k = 0 if ref_row is base_row else len(RECALIBRATION.parameters)
-    ref_bic = bic(ref_row, ref_k)
-    for r in rows[1:]:
+    ref_bic = bic(ref_row["rss"], ref_k)
+
+    def qualify(r: dict[str, Any]) -> None:
         if "rss" in r:
-            # a candidate run carries the effect parameters (the reference may be the
-            # recalibrated run with its own parameters)
-            r["delta_bic_vs_reference"] = ref_bic - bic(
-                r, len(rep.catalogue.get(r["hypothesis"]).parameters))
-    cands = [r for r in rows[1:] if "rss" in r]
+            # a screened candidate's run carries the effect's parameters, a search level one
+            # (the level), the reference its recalibration when it is the recalibrated run
+            k = 1 if "search_value" in r else len(rep.catalogue.get(r["hypothesis"]).parameters)
+            r["delta_bic_vs_reference"] = ref_bic - bic(r["rss"], k)
+
+    for r in rows[1:]:
+        qualify(r)
+    if searched and search_simulator is None:
+        rows += refined(full_simulator, rows, qualify)
+    t_full = time.perf_counter() - t_full
 
     def decisive(r):  # the full run beats the reference in both likelihood and score
         return (r["score"] - reference >= CONFIRM_MIN_GAIN
                 and r["delta_bic_vs_reference"] > ACCEPT_MARGIN)
 
+    best_h = _best_rows(r for r in rows[1:] if located(r))
+    cands = list(best_h.values())
     confirmed, best = None, recal_row
-    screened = next((r for r in cands if r["hypothesis"] == rep.missing_physics), None)
-    # a sensor found by the model-free accelerometer/velocity check needs no soil model: its
-    # full run only adds granular noise to the same conclusion
-    checked = (rep.missing_physics == "sensor_dynamics"
-               and (bool(rep.fit.get("sensor_check", {}).get("detected"))
-                    or bool(fclass.get("mismatch"))))
+    screened = best_h.get(rep.missing_physics) if rep.missing_physics else None
     if screened is not None and (checked or (
             screened["delta_bic_vs_reference"] >= -ACCEPT_MARGIN
             and screened["score"] >= reference - CONFIRM_MIN_GAIN)):
@@ -1074,11 +1235,44 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         # the recording worse by the field's objective rating does not confirm anything) or
         # another candidate's full run is decisively better than it
         confirmed, best = screened["hypothesis"], screened
-    rivals = [] if checked else [r for r in cands if r is not screened and decisive(r)]
+    rivals = [] if checked else sorted((r for r in cands if r is not screened and decisive(r)),
+                                       key=lambda r: -r["delta_bic_vs_reference"])
+    ambiguous = None
     if rivals:
-        top = max(rivals, key=lambda r: r["score"])
-        if screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
+        # among decisive rivals the likelihood ranks (the score is the field's rating, its
+        # differences between two good fits are not evidence); two within AMBIGUITY_MARGIN
+        # of each other are not told apart
+        top = rivals[0]
+        if len(rivals) > 1 and (top["delta_bic_vs_reference"] - rivals[1]["delta_bic_vs_reference"]
+                                <= AMBIGUITY_MARGIN):
+            ambiguous = [r["hypothesis"] for r in rivals[:2]]
+        elif screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
             confirmed, best = top["hypothesis"], top
+    if ambiguous:
+        rep.fit["confirmation_ambiguous"] = {
+            r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
+                              "score": r["score"]} for r in rivals[:2]}
+    if confirmed is not None and "search_value" in best:
+        _adopt_full_parameters(rep, best, searched[confirmed], search_rows or rows)
+    if skipped:
+        rep.fit["confirmation_skipped"] = skipped
+    if searched:
+        lv = [r for r in (search_rows[1:] if search_simulator is not None else rows)
+              if "search_value" in r]
+        rep.fit.setdefault("full_search", {}).update(
+            tier="search simulator" if search_simulator is not None else "full simulator",
+            runs=len(lv) + (1 if search_simulator is not None else 0),
+            levels=[{"hypothesis": r["hypothesis"], "value": r["search_value"],
+                     "score": None if not math.isfinite(r["score"]) else r["score"],
+                     "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
+                     "refined": bool(r.get("refined")), "located": located(r)}
+                    for r in lv],
+            best={n: {"value": r["search_value"], "score": r["score"],
+                      "delta_bic_vs_reference": r["delta_bic_vs_reference"]}
+                  for n, r in _best_rows(r for r in lv if "rss" in r).items()})
+        if search_simulator is not None:
+            rep.fit["full_search"]["search_baseline_score"] = search_rows[0]["score"]
+            rep.simulations["search_simulations"] = len(search_rows)
     rep.fit["confirmation"] = [{k: (None if k == "score" and not math.isfinite(v) else v)
                                 for k, v in r.items() if k != "aligned"} for r in rows]
     rep.fit["confirmation_reference_score"] = reference
@@ -1090,11 +1284,127 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     rep.simulations["full_simulations"] = len(rows)
     rep.simulations["full_wall_time_s"] = t_full
     rep.missing_physics = confirmed
-    rep.decision += (f"; full-simulation confirmation ({len(rows)} runs, reference score "
+    n_lv = sum('search_value' in r for r in rows)
+    if searched and search_simulator is not None:
+        how = (f"{len(rows)} runs, {n_lv} of them the best levels of a {len(search_rows)}-run "
+               f"search over {len(searched)} effects on the search simulator")
+    elif searched:
+        how = f"{len(rows)} runs, {n_lv} of them a full-model search over {len(searched)} effects"
+    else:
+        how = f"{len(rows)} runs"
+    at = (f" at {searched[confirmed].parameter} = {best['search_value']:.4g} "
+          f"{searched[confirmed].unit}" if confirmed and "search_value" in best else "")
+    rep.decision += (f"; full-simulation confirmation ({how}, reference score "
                      f"{reference:.3f}): "
-                     + (f"{confirmed} confirmed (score {best['score']:.3f})" if confirmed
+                     + (f"{' and '.join(ambiguous)} both beat the reference within Delta BIC "
+                        f"{AMBIGUITY_MARGIN:g} of each other, neither named; " if ambiguous else "")
+                     + (f"{confirmed} confirmed{at} (score {best['score']:.3f}, Delta BIC "
+                        f"{best.get('delta_bic_vs_reference', 0.0):.1f})"
+                        if confirmed and best is not recal_row else
+                        f"{confirmed} confirmed (score {best['score']:.3f})" if confirmed
                         else "no missing physics confirmed"))
     return rep
+
+
+def _run_full(full_simulator: Simulator, requests: list[tuple[str, dict[str, Any]]]) -> list[Any]:
+    """Run the full simulator on every request (one batch when it has ``map``); a run the full
+    model cannot do (``ValueError`` / ``RuntimeError``) is returned as the exception, except the
+    recalibration's, which is raised."""
+    if hasattr(full_simulator, "map"):
+        try:
+            return list(full_simulator.map([ov for _, ov in requests]))  # type: ignore[attr-defined]
+        except (RuntimeError, ValueError):
+            # a run of the batch failed (e.g. a hypothesis the full model cannot represent):
+            # run them one by one so that the others can still be scored
+            pass
+    outs: list[Any] = []
+    for name, ov in requests:
+        try:
+            outs.append(full_simulator(ov))
+        except (ValueError, RuntimeError) as e:  # the full model cannot run this hypothesis
+            if name == RECALIBRATION.name:
+                raise
+            outs.append(e)
+    return outs
+
+
+def _best_rows(rows: Iterable[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The run with the highest Delta BIC of each hypothesis among scored ``rows``."""
+    best: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        if "delta_bic_vs_reference" in r and (
+                r["hypothesis"] not in best
+                or r["delta_bic_vs_reference"] > best[r["hypothesis"]]["delta_bic_vs_reference"]):
+            best[r["hypothesis"]] = r
+    return best
+
+
+def _level_rows(rows: list[dict[str, Any]], name: str) -> list[dict[str, Any]]:
+    """The scored search-level runs of hypothesis ``name``, by ascending value."""
+    return sorted((r for r in rows if r["hypothesis"] == name and "search_value" in r
+                   and "delta_bic_vs_reference" in r), key=lambda r: r["search_value"])
+
+
+def _search_vertex(best: dict[str, Any], rows: list[dict[str, Any]],
+                   fs: catalogue.FullSearch) -> dict[str, float] | None:
+    """The vertex of the parabola through the best search level and its two neighbours
+    (Delta BIC against the search coordinate), when the best level is interior and the
+    parabola opens downwards: ``{"value", "curvature"}`` (curvature of -Delta BIC / 2, i.e.
+    the Fisher information of the coordinate), else None."""
+    lv = _level_rows(rows, best["hypothesis"])
+    i = next((j for j, r in enumerate(lv) if r is best), None)
+    if i is None or i == 0 or i == len(lv) - 1:
+        return None
+    u = np.array([fs.coord(lv[j]["search_value"]) for j in (i - 1, i, i + 1)])
+    b = np.array([lv[j]["delta_bic_vs_reference"] for j in (i - 1, i, i + 1)])
+    a2, a1, _ = np.polyfit(u, b, 2)
+    if not a2 < 0.0:
+        return None
+    uv = float(np.clip(-a1 / (2.0 * a2), u[0], u[2]))
+    return {"value": fs.value(uv), "curvature": float(-a2 / 2.0)}
+
+
+def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.FullSearch,
+                           rows: list[dict[str, Any]]) -> None:
+    """Record the full model's value of a named searched effect in its hypothesis entry
+    (``full_model``) and, where the screening parameter means the same, in ``parameters``
+    (the screening's kept in ``screening_parameters``). Uncertainty: from the curvature of
+    Delta BIC over the levels around the best run (1 / sqrt(information) in the search
+    coordinate), else half the distance to the nearest level."""
+    name, x = best["hypothesis"], float(best["search_value"])
+    lv = _level_rows(rows, name)
+    levels = [r for r in lv if not r.get("refined")]
+    i = min(range(len(levels)), key=lambda j: abs(fs.coord(levels[j]["search_value"]) - fs.coord(x)))
+    around = [levels[j] for j in (i - 1, i, i + 1) if 0 <= j < len(levels)]
+    sd = None
+    if len(around) == 3:
+        u = np.array([fs.coord(r["search_value"]) for r in around])
+        a2 = np.polyfit(u, [r["delta_bic_vs_reference"] for r in around], 2)[0]
+        if a2 < 0.0:
+            su = 1.0 / math.sqrt(-a2 / 2.0)
+            sd = su * x if fs.scale == "log" else su
+    if sd is None:
+        gaps = [abs(fs.coord(r["search_value"]) - fs.coord(x)) for r in levels
+                if r["search_value"] != x]
+        su = 0.5 * min(gaps) if gaps else float("nan")
+        sd = su * x if fs.scale == "log" else su
+    h = next((h for h in rep.hypotheses if h["name"] == name), None)
+    if h is None:
+        return
+    h["full_model"] = {"parameters": {fs.parameter: x}, "uncertainty": {fs.parameter: sd},
+                       "unit": {fs.parameter: fs.unit}, "overrides": best["overrides"],
+                       "score": best["score"],
+                       "delta_bic_vs_reference": best["delta_bic_vs_reference"],
+                       "runs": len(lv)}
+    # the scenario fix is the full model's own (the screening's values were mapped across)
+    h["scenario_overrides"] = dict(best["overrides"])
+    if fs.parameter in h.get("parameters", {}):
+        h["screening_parameters"] = dict(h["parameters"])
+        h["parameters"] = {**h["parameters"], fs.parameter: x}
+        if isinstance(h.get("uncertainty"), dict):
+            h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
+    rep.fit.setdefault("full_search", {})["named"] = {"hypothesis": name, fs.parameter: x,
+                                                      "uncertainty": sd, "unit": fs.unit}
 
 
 #: a parameter within this fraction of its search range of its "off" value leaves the effect off

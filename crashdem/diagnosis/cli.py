@@ -287,7 +287,7 @@ def _channel_map(specs: list[str] | None, rec: dict[str, Signal],
 def diagnose_command(args: argparse.Namespace) -> int:
     """Entry point used by ``crashdem.cli`` (``crashdem diagnose ...``)."""
     from crashdem import scenario as sc
-    from crashdem.diagnosis import diagnose, screen_then_confirm, write_report
+    from crashdem.diagnosis import diagnose, screen_then_confirm, working_rate, write_report
     from crashdem.recordings import read_recording
 
     overrides = dict(sc.parse_override(s) for s in (getattr(args, "set", None) or []))
@@ -310,6 +310,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
         if how is not None:
             meta["converted"] = conversions[rom_name] = how
         rec[rom_name] = Signal(rom_name, sig.t, sig.data, sig.unit, sig.cfc, meta)
+    rec = working_rate(rec)[0]  # the rate the screening works at (RomSettings below)
     # primary channel first (the longitudinal acceleration of the glider, the drop's vertical)
     primary = PLANAR_CHANNELS[0] if planar else ACCEL
     rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != primary))
@@ -356,9 +357,13 @@ def diagnose_command(args: argparse.Namespace) -> int:
             local = full
             full = _LocalFallback(full_simulator_from_args(args, scen, cmap), local,  # type: ignore[assignment]
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
+        searched, search_sim, search_how = _search_setup(
+            scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
-                                  baseline_raw=base_raw, **cat_kw)
+                                  baseline_raw=base_raw, full_search=searched,
+                                  search_simulator=search_sim, **cat_kw)
+        rep.simulations["full_search"] = search_how
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
     else:
@@ -373,6 +378,77 @@ def diagnose_command(args: argparse.Namespace) -> int:
     for p in paths["plots"]:
         print(p)
     return 0
+
+
+#: the coarse resolution of the full-model search (validation/campaign/studies.py "small":
+#: 0.10 m grains in a 2 m tank, ~700 grains, about a second per impact once deposited)
+SEARCH_COARSE: dict[str, Any] = {"soil.radius": 0.10, "soil.radius_spread": 0.10,
+                                 "container.diameter": 2.0, "container.length": 2.0,
+                                 "container.width": 2.0}
+
+
+def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
+                  ) -> tuple[dict[str, Any], Any, str]:
+    """The full-model search of ``crashdem diagnose`` (``--full-search``): the effects searched
+    (the drop catalogue's ``full_search`` minus the physics the scenario already has switched
+    on), the simulator it runs on (None: the full simulator) and a one-line description.
+
+    ``auto`` (default) searches on the scenario itself when it is no finer than the coarse
+    resolution (``SEARCH_COARSE``), else on the scenario at that resolution, whose best levels
+    are then confirmed at the scenario's own (``screen_then_confirm``'s ``search_simulator``;
+    22 coarse runs instead of 22 full ones: at the default resolution one full run takes about
+    two minutes); ``full`` always on the scenario; ``coarse`` always coarse; ``off`` none."""
+    from crashdem.diagnosis.catalogue import DROP
+
+    if mode not in ("auto", "full", "coarse", "off"):
+        raise ValueError(f"--full-search={mode!r}: must be one of auto, full, coarse, off")
+    if planar or mode == "off":
+        return {}, None, "off" if mode == "off" else "not available for the glider"
+    searched = {}
+    for k, fs in DROP.full_search.items():
+        if scen.get(f"physics.{k}.enabled") or (k == "particle_rotation"
+                                                and scen.get("soil.rotation") == "free"):
+            continue
+        # levels the scenario cannot take (e.g. a floor above its layering interface) are dropped
+        ok = tuple(x for x in fs.values if _runnable(scen, fs.overrides(x)))
+        if len(ok) >= 2:
+            searched[k] = replace(fs, values=ok) if ok != fs.values else fs
+    box = scen.get("container.shape") == "box"
+    size = max(scen.get("container.length"), scen.get("container.width")) if box \
+        else scen.get("container.diameter")
+    finer = scen.get("soil.radius") < SEARCH_COARSE["soil.radius"] * 0.999 or size > 2.0 * 1.001
+    if mode == "full" or (mode == "auto" and not finer):
+        return searched, None, f"{len(searched)} effects on the scenario itself"
+    keep = ("container.length", "container.width") if box else ("container.diameter",)
+    coarse = {k: v for k, v in SEARCH_COARSE.items()
+              if not k.startswith("container.") or k in keep}
+    cscen = scen.with_overrides(coarse)
+
+    def search(ov: dict[str, Any]) -> dict[str, Signal]:
+        from crashdem.run import run_scenario
+
+        scale_keys = {k: v for k, v in ov.items() if k.startswith("calibration.")}
+        keys = {k: v for k, v in ov.items() if not k.startswith("calibration.")}
+        s2 = cscen.with_overrides(_apply_scales(cscen, scale_keys) | keys)
+        path = run_scenario(s2, out_dir=out / "search_runs", progress=False)
+        return {k: v for k, v in _result_channels(path, cmap).items() if v is not None}
+
+    return searched, search, (f"{len(searched)} effects at the coarse resolution "
+                              f"({', '.join(f'{k}={v:g}' for k, v in coarse.items())}), the "
+                              f"leading ones confirmed at the scenario's")
+
+
+def _runnable(scen, overrides: dict[str, Any]) -> bool:
+    """True when the scenario with ``overrides`` is valid and its bed can be specified (the
+    checks ``crashdem.run`` makes before any deposition)."""
+    from crashdem.run import packing_spec
+    from crashdem.scenario import ScenarioError
+
+    try:
+        packing_spec(scen.with_overrides(overrides))
+    except (ScenarioError, ValueError):
+        return False
+    return True
 
 
 class _LocalFallback:

@@ -7,17 +7,20 @@ noise, trigger offset, CFC 60). Baseline: the same scenario without the effect a
 numerics. Oracle: the generator's hidden truth (effect name, comparable parameter values).
 
 The DEM runs are cached on disk (``generator_dem.cache_dir()``); a cold cache costs about
-15 runs of 1-20 s each.
+15 truth runs of 1-20 s each, plus the full-model search's levels (about a second each at the
+baseline numerics; the layering and floor levels deposit their own beds once).
 
 The diagnosis is the full method: ROM screening calibrated to (and anchored on) the baseline
 simulation, then ``screen_then_confirm`` with the real DEM (``generator_dem.DemFullSimulator``)
-for the top ``TOP_K`` candidates.
+for the top ``TOP_K`` candidates and the full-model search over the soil effects
+(``catalogue.DROP_FULL_SEARCH``: 22 levels plus one refinement run).
 
 Status (measured, see docs/diagnosis.md "Validation on DEM truth"): the null cases claim no
-missing physics (model-error floor); layering, initial conditions, contact damping and sensor
-dynamics (2/2 each; the sensor by the model-free accelerometer/velocity check) are named; the
-issue's overall criteria (90 % named, all comparable parameters within 15 %, every score +0.1
-to >= 0.85) are NOT met on DEM truth yet.
+missing physics (model-error floor); layering, floor proximity, initial conditions, contact
+damping and sensor dynamics (2/2 each; the sensor by the model-free accelerometer/velocity
+check, floor and damping by the full-model search) are named, cohesion is not (0/2), no
+effect is named wrongly; the issue's overall criteria (90 % named, all comparable parameters within 15 %,
+every score +0.1 to >= 0.85) are NOT met on DEM truth yet.
 Those assertions are kept unchanged and marked ``xfail`` (non-strict) so that they report
 progress without hiding the gap.
 """
@@ -30,6 +33,7 @@ import numpy as np
 import pytest
 
 from crashdem.diagnosis import fit, screen_then_confirm
+from crashdem.diagnosis.catalogue import DROP
 from crashdem.diagnosis.generator_dem import DemFullSimulator, dem_concealed_case, impact_speed
 
 #: effect types of the DEM truth (structural_crush: not available for the drop sphere)
@@ -46,12 +50,13 @@ PARAM_RTOL = 0.15
 MIN_SCORE_GAIN = 0.10
 MIN_SCORE_AFTER = 0.85
 
-GAP = ("DEM truth, measured: 8/12 effect cases named, no wrong name (floor proximity 0/2 and "
-       "cohesion 0/2 missed), layering depth 28-31 % short (about one grain radius at r = 0.10 m), "
-       "final scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same "
-       "physics score against each other; a depth-indexed anchor, the floor factor on the drag "
-       "term and a free floor stiffening did not name floor or cohesion (2026-11-22); see "
-       "docs/diagnosis.md 'Validation on DEM truth' and 'Limitations'")
+GAP = ("DEM truth, measured with the full-model search (2026-11-22, session 7): 10/12 effect "
+       "cases named, no wrong name, cohesion 0/2 (seed 11: contact damping and cohesion beat "
+       "the reference within Delta BIC 2 of each other, neither named; seed 12 below the null "
+       "level); layering depth 28-30 % short (about one grain radius at r = 0.10 m), floor "
+       "depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
+       "scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same physics "
+       "score against each other; see docs/diagnosis.md 'Validation on DEM truth'")
 
 
 @pytest.fixture(scope="session")
@@ -77,10 +82,12 @@ def dem_runs():
     print(f"metric: {fit.metric_name()}")
     for c, r, tg, td in out:
         h = r.hypotheses[0]
+        named = next((x for x in r.hypotheses if x["name"] == r.missing_physics), h)
         print(f"  {str(c.effect):20s} seed {c.seed}: confirmed={r.missing_physics} screened top="
               f"{h['name']} dBIC={h['delta_bic_vs_recalibration']:.1f} score "
               f"{r.fit['before']['overall']:.3f} -> {_after(r):.3f} truth={c.values} "
-              f"fitted={ {k: round(v, 4) for k, v in h['parameters'].items()} } "
+              f"{named['name']}={ {k: round(v, 4) for k, v in named['parameters'].items()} } "
+              f"full model={named.get('full_model', {}).get('parameters')} "
               f"n_eff={r.fit['n_effective']:.0f} full runs={r.simulations['full_simulations']} "
               f"gen {tg:.1f} s diag {td:.1f} s")
     return out
@@ -118,12 +125,42 @@ def test_dem_null_cases_claim_no_missing_physics(dem_runs):
         assert r.missing_physics is None, (c.seed, r.decision)
 
 
+#: full runs of the full-model search (every level of every searched effect) plus its one
+#: refinement run
+N_SEARCH = sum(len(fs.values) for fs in DROP.full_search.values())
+
+
 def test_dem_diagnosis_cost(dem_runs):
-    """Screening plus full-DEM confirmation of one recording stays far below the 15 min budget
-    and needs at most 1 + TOP_K full simulations."""
+    """Screening plus full-DEM confirmation and search of one recording stays far below the
+    15 min budget and needs at most 1 + TOP_K full simulations for the candidates plus the
+    search's levels and one refinement run (none when the model-free sensor check answers)."""
     for c, r, _, td in dem_runs:
         assert td < 300.0, (c.effect, c.seed, td)
-        assert 1 <= r.simulations["full_simulations"] <= 1 + TOP_K
+        n = r.simulations["full_simulations"]
+        assert 1 <= n <= 1 + TOP_K + N_SEARCH + 1, (c.effect, c.seed, n)
+        if "full_search" in r.fit:
+            assert r.fit["full_search"]["runs"] >= N_SEARCH
+
+
+def test_full_model_search_names_floor_proximity(dem_runs):
+    """A rigid floor nearer than modelled (0.77 / 0.79 m) is named in both DEM-truth cases by
+    the full-model search: the screening model cannot produce the floor's early stop with
+    rebound, the DEM at floor depths of 0.6-1.25 m can; before the search both were left
+    unnamed. The named depth is the full model's (``hypotheses[*].full_model``); seed 12's is
+    within 15 % (measured 0.80 m), seed 11's is not (1.05 m: the truth's grains are 10-15 %
+    off the baseline's, and the floor acts through the grain layers left under the sphere)."""
+    floors = [(c, r) for c, r, _, _ in dem_runs if c.effect == "boundary_proximity"]
+    assert len(floors) == 2
+    for c, r in floors:
+        assert r.missing_physics == "boundary_proximity", (c.seed, r.decision)
+        h = next(h for h in r.hypotheses if h["name"] == "boundary_proximity")
+        assert h["full_model"]["parameters"]["floor_depth"] == h["parameters"]["floor_depth"]
+        assert h["scenario_overrides"]["physics.boundary_proximity.floor_depth"] == \
+            h["parameters"]["floor_depth"]
+        assert r.fit["after_full"]["overall"] - r.fit["before"]["overall"] >= MIN_SCORE_GAIN
+    c12, r12 = next((c, r) for c, r in floors if c.seed == 12)
+    h12 = next(h for h in r12.hypotheses if h["name"] == "boundary_proximity")
+    assert abs(h12["parameters"]["floor_depth"] / c12.values["floor_depth"] - 1.0) < PARAM_RTOL
 
 
 @pytest.mark.xfail(reason=GAP, strict=False)
@@ -171,7 +208,7 @@ def test_full_dem_confirmation_of_layering(dem_runs):
     c, r = next((c, r) for c, r, _, _ in dem_runs if c.effect == "soil_layering" and c.seed == 11)
     assert r.hypotheses[0]["name"] == "soil_layering"
     assert r.missing_physics == "soil_layering", r.decision
-    assert r.simulations["full_simulations"] == 1 + TOP_K
+    assert 1 + TOP_K + N_SEARCH <= r.simulations["full_simulations"] <= 1 + TOP_K + N_SEARCH + 1
     conf = {row["hypothesis"]: row for row in r.fit["confirmation"]}
     assert conf["soil_layering"]["delta_bic_vs_reference"] > fit.ACCEPT_MARGIN
     after = r.fit["after_full"]["overall"]

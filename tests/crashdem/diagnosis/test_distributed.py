@@ -110,10 +110,12 @@ def test_dask_confirmation_equals_serial(client, layering_case, tmp_path):
         return {new: res[name] for name, new in CHANNELS.items()}
 
     baseline, rec = simulate(RomParams()), layering_case.recording
-    a = screen_then_confirm(baseline, rec, serial_full, top_k=TOP_K)
+    # the 1 + k confirmation batch (the full-model search adds 22 levels to the same batch and
+    # is covered in test_report_confirm.py)
+    a = screen_then_confirm(baseline, rec, serial_full, top_k=TOP_K, full_search=False)
     full = DaskFullSimulator(base, tmp_path / "confirmation.h5", channel_map=CHANNELS,
                              member_fn=TruthMember(base), client=client)
-    b = screen_then_confirm(baseline, rec, full, top_k=TOP_K)
+    b = screen_then_confirm(baseline, rec, full, top_k=TOP_K, full_search=False)
     assert a.hypotheses == b.hypotheses  # the (deterministic) screening is the same
 
     assert a.simulations["full_simulations"] == b.simulations["full_simulations"] == 1 + TOP_K
@@ -200,6 +202,7 @@ def test_cli_full_confirm_on_a_running_cluster(client, tmp_path, monkeypatch, ca
     out = tmp_path / "out"
     assert cli.main(["diagnose", "--scenario", str(scen), "--recording", str(rec_path),
                      "--out", str(out), "--baseline", "rom", "--full-confirm", "3",
+                     "--full-search", "off",
                      "--scheduler", client.scheduler.address, "--member-threads", "1"]) == 0
     rep = json.loads((out / "report.json").read_text())
     assert rep["simulations"]["full_simulations"] == 3

@@ -60,7 +60,8 @@ def test_screen_then_confirm_counts_full_simulations(layering_case):
         return acquire(p, np.random.default_rng(0), noise={"accel_z": 0.0, "velocity_z": 0.0})
 
     top_k = 2
-    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k,
+                              full_search=False)
     assert rep.simulations["full_simulations"] == len(calls) == 1 + top_k
     assert rep.missing_physics == "soil_layering"
     conf = {r["hypothesis"]: r["score"] for r in rep.fit["confirmation"]}
@@ -80,6 +81,109 @@ def _cli_rom_diagnose(tmp_path, rec_path, *extra: str) -> tuple[int, dict | None
                    "--out", str(out), "--baseline", "rom", *extra])
     rep = out / "report.json"
     return rc, (json.loads(rep.read_text()) if rc == 0 and rep.exists() else None)
+
+
+def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
+    """A stand-in for the full model: the ROM driven through *scenario keys*
+    (``rom_from_scenario``, truth numerics, no noise); the overrides of every call are
+    appended to ``calls``. With ``recording``, runs switching on an effect named in
+    ``same_as_recording`` return the recording itself (two effects that fit equally)."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    base_scen = scenario.loads(SCENARIO_TOML)
+
+    def full(overrides):
+        calls.append(dict(overrides))
+        if any(overrides.get(f"physics.{e}.enabled") for e in same_as_recording):
+            return dict(recording)
+        scales = {k.split(".", 1)[1]: v for k, v in overrides.items() if k.startswith("calibration.")}
+        keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
+        p = rom_from_scenario(base_scen.with_overrides(keys)).with_values(scales)
+        return acquire(p, np.random.default_rng(0), noise={"accel_z": 0.0, "velocity_z": 0.0})
+
+    return full
+
+
+def test_full_search_runs_every_level_of_every_effect(layering_case):
+    """With the full-model search, the full model also runs each searched effect at each of its
+    levels (``catalogue.DROP_FULL_SEARCH``: 22) and at most one refinement; every level is
+    reported with its score and Delta BIC, each effect is judged by its best run, and the
+    concealed layering is named (its interface 0.2-0.5 m levels bracket the truth)."""
+    from crashdem.diagnosis.catalogue import DROP
+
+    calls: list = []
+    full = _scenario_rom_simulator(calls)
+    top_k = 2
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
+    n_levels = sum(len(fs.values) for fs in DROP.full_search.values())
+    assert n_levels == 22
+    assert 1 + top_k + n_levels <= len(calls) == rep.simulations["full_simulations"] \
+        <= 1 + top_k + n_levels + 1
+    levels = rep.fit["full_search"]["levels"]
+    assert len(levels) >= n_levels
+    assert {lv["hypothesis"] for lv in levels} == set(DROP.full_search)
+    assert all(lv["delta_bic_vs_reference"] is not None for lv in levels)
+    assert rep.missing_physics == "soil_layering", rep.decision
+
+
+def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
+    """With a separate (cheaper) search simulator the levels run there (plus its baseline run
+    and at most one refinement) and only the leading effects' best levels reach the full
+    model, in the place of screened candidates: the full runs stay 1 + top_k."""
+    full_calls: list = []
+    search_calls: list = []
+    top_k = 2
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording,
+                              _scenario_rom_simulator(full_calls), top_k=top_k,
+                              search_simulator=_scenario_rom_simulator(search_calls))
+    assert len(full_calls) == rep.simulations["full_simulations"] <= 1 + top_k
+    assert 23 <= len(search_calls) == rep.simulations["search_simulations"] <= 24
+    assert search_calls[0] == {}  # the search simulator's own baseline run comes first
+    assert rep.fit["full_search"]["tier"] == "search simulator"
+    assert rep.missing_physics == "soil_layering", rep.decision
+
+
+def test_two_effects_that_fit_equally_are_not_told_apart(layering_case):
+    """Two searched effects whose full runs fit the recording equally well (here: both return
+    the recording itself) are both decisive but within ``AMBIGUITY_MARGIN`` of each other:
+    neither is named and the report lists them (``fit.confirmation_ambiguous``)."""
+    calls: list = []
+    full = _scenario_rom_simulator(calls, layering_case.recording,
+                                   same_as_recording=("cohesion", "contact_damping"))
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=2,
+                              hypotheses=["cohesion", "contact_damping", "initial_conditions"])
+    amb = rep.fit["confirmation_ambiguous"]
+    assert set(amb) == {"cohesion", "contact_damping"}
+    assert rep.missing_physics is None, rep.decision
+    assert "neither named" in rep.decision
+
+
+def test_full_search_levels_and_vertex():
+    """``FullSearch``: levels must ascend, a log scale needs positive levels; ``located``
+    excludes the last level towards the fading end and the interval before it; the refinement
+    vertex of an exact parabola in Delta BIC is its maximum."""
+    from crashdem.diagnosis import _search_vertex
+    from crashdem.diagnosis.catalogue import FullSearch
+
+    with pytest.raises(ValueError, match="ascending"):
+        FullSearch("d", "m", ("k",), (0.5, 0.4))
+    with pytest.raises(ValueError, match="log"):
+        FullSearch("c", "Pa", ("k",), (0.0, 1.0), scale="log")
+    with pytest.raises(ValueError, match="fades"):
+        FullSearch("d", "m", ("k",), (0.1, 0.2), fades="sideways")
+    deep = FullSearch("floor_depth", "m", ("k",), (0.6, 0.7, 0.8, 0.9))
+    assert deep.located(0.6) and deep.located(0.8) and not deep.located(0.85)
+    assert not deep.located(0.9)
+    weak = FullSearch("cohesion", "Pa", ("k",), (1e4, 2e4, 4e4), scale="log", fades="low")
+    assert not weak.located(1e4) and not weak.located(1.5e4) and weak.located(2e4)
+    assert deep.overrides(0.7) == {"k": 0.7}
+    rows = [{"hypothesis": "b", "search_value": x,
+             "delta_bic_vs_reference": 50.0 - 1000.0 * (x - 0.73) ** 2} for x in deep.values]
+    best = max(rows, key=lambda r: r["delta_bic_vs_reference"])
+    v = _search_vertex(best, rows, deep)
+    assert v["value"] == pytest.approx(0.73, abs=1e-9)
+    assert _search_vertex(rows[0], rows, deep) is None  # an edge level has no bracket
 
 
 def test_cli_diagnose_end_to_end(tmp_path):
