@@ -112,10 +112,37 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                      f"{a['timing_error_s'] * 1e3:.1f} | {_fmt(b['rms_error'])} | {_fmt(a['rms_error'])} |")
     lines.append(f"| **overall** | {_fmt(fit['before']['overall'])} | {_fmt(fit['after']['overall'])} "
                  "| | | | | | |")
+    conf = fit.get("confirmation")
+    if conf:
+        lines += ["", "## Full-simulation confirmation", "",
+                  f"Reference score (the better of the baseline and the recalibrated full run): "
+                  f"{_fmt(fit.get('confirmation_reference_score'))}; confirmed: "
+                  f"{fit.get('confirmed_missing_physics') or 'none'}.", "",
+                  "| run | scenario overrides | score | Delta BIC vs reference |", "|---|---|---|---|"]
+        for r in conf:
+            if "search_value" in r:
+                continue
+            ov = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
+                           for k, v in (r.get("overrides") or {}).items())
+            db = r.get("delta_bic_vs_reference")
+            lines.append(f"| {r['hypothesis']} | {ov or '-'} | {_fmt(r.get('score'))} | "
+                         f"{'-' if db is None else f'{db:.1f}'} |")
+    search = fit.get("full_search")
+    if search and search.get("levels"):
+        lines += ["", f"Full-model search ({search.get('tier')}, {search.get('runs')} runs): best "
+                  "level of each effect (a level at the end where the effect fades names "
+                  "nothing).", "", "| effect | best level | score | Delta BIC vs reference |",
+                  "|---|---|---|---|"]
+        for name, b in (search.get("best") or {}).items():
+            lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
+                         f"{b['delta_bic_vs_reference']:.1f} |")
     sims = d["simulations"]
     lines += ["", "## Cost", "",
               f"Screening runs ({sims['screening_model']}): {sims['screening_runs']}; full simulations: "
-              f"{sims['full_simulations']}; wall time {sims['wall_time_s']:.1f} s.", ""]
+              f"{sims['full_simulations']}"
+              + (f"; search simulations: {sims['search_simulations']}"
+                 if sims.get("search_simulations") else "")
+              + f"; wall time {sims['wall_time_s']:.1f} s.", ""]
     if plots:
         lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
     return "\n".join(lines)

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 from soil import contact_laws as cl
@@ -66,9 +67,12 @@ force = st.floats(-1e3, 1e3).filter(lambda v: v == 0.0 or abs(v) > 1e-100)
 
 @HYP
 @given(force, force, st.floats(0.0, 1e3), st.floats(1.0, 1e6))
+@example(416.7050794048648, 0.0625, 416.705078125, 1.0)  # |F| - limit = 1.5e-8 |F|
 def test_coulomb_cap(fx, fy, lim, ks):
     """Oracle: Coulomb |F_s| <= limit, direction kept; Yade plastic dissipation
-    ((trial - capped)/ks) . capped >= 0."""
+    ((trial - capped)/ks) . capped >= 0, equal to (|F| - limit) limit / ks to 1e-9 relative or
+    the rounding of the difference trial - capped, a few ulp of |F| times limit / ks (found by
+    Hypothesis: |F| - limit = 1.5e-8 |F| left 4.3e-12 J of 2.5e-3 J, 0.1 eps |F| limit / ks)."""
     gx, gy, gz, d, slipped = cl.coulomb_cap(fx, fy, 0.0, lim, ks)
     f = math.hypot(fx, fy)
     if f <= lim:
@@ -76,7 +80,8 @@ def test_coulomb_cap(fx, fy, lim, ks):
     else:
         assert math.hypot(gx, gy) == pytest.approx(lim, rel=1e-12, abs=1e-300)
         assert gx * fy - gy * fx == pytest.approx(0.0, abs=1e-9 * f * f)
-        assert d == pytest.approx((f - lim) * lim / ks, rel=1e-9, abs=1e-300)
+        rounding = 4.0 * sys.float_info.epsilon * f * lim / ks
+        assert d == pytest.approx((f - lim) * lim / ks, rel=1e-9, abs=rounding)
         assert slipped
 
 

@@ -105,11 +105,12 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
     return full
 
 
-def test_full_search_runs_every_level_of_every_effect(layering_case):
+def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     """With the full-model search, the full model also runs each searched effect at each of its
     levels (``catalogue.DROP_FULL_SEARCH``: 22) and at most one refinement; every level is
-    reported with its score and Delta BIC, each effect is judged by its best run, and the
-    concealed layering is named (its interface 0.2-0.5 m levels bracket the truth)."""
+    reported with its score and Delta BIC (report.json) and each effect's best level in
+    report.md, each effect is judged by its best run, and the concealed layering is named (its
+    interface 0.2-0.5 m levels bracket the truth)."""
     from crashdem.diagnosis.catalogue import DROP
 
     calls: list = []
@@ -125,6 +126,12 @@ def test_full_search_runs_every_level_of_every_effect(layering_case):
     assert {lv["hypothesis"] for lv in levels} == set(DROP.full_search)
     assert all(lv["delta_bic_vs_reference"] is not None for lv in levels)
     assert rep.missing_physics == "soil_layering", rep.decision
+    md = (tmp_path / "report.md")
+    write_report(rep, tmp_path, plots=False)
+    text = md.read_text()
+    assert "## Full-simulation confirmation" in text and "Full-model search" in text
+    for name in DROP.full_search:
+        assert f"| {name} |" in text
 
 
 def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
