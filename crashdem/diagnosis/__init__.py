@@ -1036,14 +1036,17 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     chans = rep.channels
     primary = chans[0]
 
+    def rated(al: Mapping[str, Signal]) -> dict[str, Any]:
+        """Per-channel and overall scores of channels aligned on the recording."""
+        per = {ch: score_signals(rec[ch], al[ch], tuple(rep.fit["score_window_s"])) for ch in chans}
+        return {"score": float(np.mean([v["score"] for v in per.values()])),
+                "per_channel": per, "aligned": dict(al)}
+
     def score(h_name: str, overrides: dict[str, Any], out: Mapping[str, Signal]) -> dict[str, Any]:
         out = _si(out)
         shift = onset_time(rec[primary], rep.noise[primary].sigma) - onset_time(out[primary], 0.0)
-        al = {ch: align(rec[ch], out[ch], shift) for ch in chans}
-        per = {ch: score_signals(rec[ch], al[ch], tuple(rep.fit["score_window_s"])) for ch in chans}
-        overall = float(np.mean([v["score"] for v in per.values()]))
-        return {"hypothesis": h_name, "overrides": overrides, "score": overall,
-                "per_channel": per, "aligned": al}
+        return {"hypothesis": h_name, "overrides": overrides,
+                **rated({ch: align(rec[ch], out[ch], shift) for ch in chans})}
 
     by_name = {h["name"]: h for h in rep.hypotheses}
     recal = by_name[RECALIBRATION.name]
@@ -1114,16 +1117,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         al = {ch: Signal(ch, rep.baseline[ch].t, rep.baseline[ch].data + r["aligned"][ch].data
                          - ref["aligned"][ch].data, rep.baseline[ch].unit, rep.baseline[ch].cfc)
               for ch in chans}
-        per = {ch: score_signals(rec[ch], al[ch], tuple(rep.fit["score_window_s"]))
-               for ch in chans}
-        return {**r, "aligned": al, "per_channel": per, "anchored": True,
-                "score": float(np.mean([v["score"] for v in per.values()])),
-                "rss": _full_rss(rep, al)}
+        return {**r, **rated(al), "anchored": True, "rss": _full_rss(rep, al)}
 
-    def refined(sim: Simulator, rws: list[dict[str, Any]],
-                qual: Callable[[dict[str, Any]], None]) -> list[dict[str, Any]]:
+    def refined(sim: Simulator, rws: list[dict[str, Any]]) -> list[dict[str, Any]]:
         """One run of the leading searched effect at the vertex of the parabola through its
-        best level and the two neighbours (in the search coordinate), when interior."""
+        best level and the two neighbours (in the search coordinate), when interior; the
+        caller gives it its Delta BIC."""
         lead = _best_rows(r for r in rws if "search_value" in r and r["hypothesis"] in searched
                           and located(r))
         if not lead:
@@ -1136,7 +1135,6 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         ov = {**searched[name].overrides(v["value"]), **cfc_key}
         extra = row(name, ov, v["value"], _run_full(sim, [(name, ov)])[0])
         extra["refined"] = True
-        qual(extra)
         return [extra]
 
     t_full = time.perf_counter()
@@ -1163,8 +1161,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
 
         for r in search_rows[1:]:
             s_qualify(r)
-        extra = [anchored(r, s_ref) for r in refined(search_simulator, search_rows,
-                                                     lambda r: None)]
+        extra = [anchored(r, s_ref) for r in refined(search_simulator, search_rows)]
         for r in extra:
             s_qualify(r)
         search_rows += extra
@@ -1216,7 +1213,10 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     for r in rows[1:]:
         qualify(r)
     if searched and search_simulator is None:
-        rows += refined(full_simulator, rows, qualify)
+        extra = refined(full_simulator, rows)
+        for r in extra:
+            qualify(r)
+        rows += extra
     t_full = time.perf_counter() - t_full
 
     def decisive(r):  # the full run beats the reference in both likelihood and score
@@ -1345,23 +1345,29 @@ def _level_rows(rows: list[dict[str, Any]], name: str) -> list[dict[str, Any]]:
                    and "delta_bic_vs_reference" in r), key=lambda r: r["search_value"])
 
 
+def _parabola(lv: list[dict[str, Any]], i: int, fs: catalogue.FullSearch
+              ) -> tuple[np.ndarray, float, float] | None:
+    """The parabola ``a2 u^2 + a1 u + a0`` of Delta BIC through level ``lv[i]`` and its two
+    neighbours in the search coordinate u: ``(u of the three, a2, a1)``; None at an edge."""
+    if i <= 0 or i >= len(lv) - 1:
+        return None
+    u = np.array([fs.coord(lv[j]["search_value"]) for j in (i - 1, i, i + 1)])
+    a2, a1, _ = np.polyfit(u, [lv[j]["delta_bic_vs_reference"] for j in (i - 1, i, i + 1)], 2)
+    return u, float(a2), float(a1)
+
+
 def _search_vertex(best: dict[str, Any], rows: list[dict[str, Any]],
                    fs: catalogue.FullSearch) -> dict[str, float] | None:
     """The vertex of the parabola through the best search level and its two neighbours
     (Delta BIC against the search coordinate), when the best level is interior and the
-    parabola opens downwards: ``{"value", "curvature"}`` (curvature of -Delta BIC / 2, i.e.
-    the Fisher information of the coordinate), else None."""
+    parabola opens downwards: ``{"value"}``, else None."""
     lv = _level_rows(rows, best["hypothesis"])
     i = next((j for j, r in enumerate(lv) if r is best), None)
-    if i is None or i == 0 or i == len(lv) - 1:
+    par = _parabola(lv, i, fs) if i is not None else None
+    if par is None or not par[1] < 0.0:
         return None
-    u = np.array([fs.coord(lv[j]["search_value"]) for j in (i - 1, i, i + 1)])
-    b = np.array([lv[j]["delta_bic_vs_reference"] for j in (i - 1, i, i + 1)])
-    a2, a1, _ = np.polyfit(u, b, 2)
-    if not a2 < 0.0:
-        return None
-    uv = float(np.clip(-a1 / (2.0 * a2), u[0], u[2]))
-    return {"value": fs.value(uv), "curvature": float(-a2 / 2.0)}
+    u, a2, a1 = par
+    return {"value": fs.value(float(np.clip(-a1 / (2.0 * a2), u[0], u[2])))}
 
 
 def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.FullSearch,
@@ -1375,14 +1381,11 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
     lv = _level_rows(rows, name)
     levels = [r for r in lv if not r.get("refined")]
     i = min(range(len(levels)), key=lambda j: abs(fs.coord(levels[j]["search_value"]) - fs.coord(x)))
-    around = [levels[j] for j in (i - 1, i, i + 1) if 0 <= j < len(levels)]
+    par = _parabola(levels, i, fs)
     sd = None
-    if len(around) == 3:
-        u = np.array([fs.coord(r["search_value"]) for r in around])
-        a2 = np.polyfit(u, [r["delta_bic_vs_reference"] for r in around], 2)[0]
-        if a2 < 0.0:
-            su = 1.0 / math.sqrt(-a2 / 2.0)
-            sd = su * x if fs.scale == "log" else su
+    if par is not None and par[1] < 0.0:
+        su = 1.0 / math.sqrt(-par[1] / 2.0)
+        sd = su * x if fs.scale == "log" else su
     if sd is None:
         gaps = [abs(fs.coord(r["search_value"]) - fs.coord(x)) for r in levels
                 if r["search_value"] != x]

@@ -310,7 +310,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
         if how is not None:
             meta["converted"] = conversions[rom_name] = how
         rec[rom_name] = Signal(rom_name, sig.t, sig.data, sig.unit, sig.cfc, meta)
-    rec = working_rate(rec)[0]  # the rate the screening works at (RomSettings below)
+    rec, decimated = working_rate(rec)  # the rate the screening works at (RomSettings below)
     # primary channel first (the longitudinal acceleration of the glider, the drop's vertical)
     primary = PLANAR_CHANNELS[0] if planar else ACCEL
     rec = dict(sorted(rec.items(), key=lambda kv: kv[0] != primary))
@@ -341,16 +341,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
         dask = getattr(args, "workers", None) != 0
         _share_packings(source, [Path(args.out) / ("confirmation.h5.members" if dask
                                                    else "full_runs")])
-        from crashdem.run import run_scenario
-
-        def full(ov: dict[str, Any]) -> dict[str, Signal]:
-            scale_keys = {k: v for k, v in ov.items() if k.startswith("calibration.")}
-            keys = {k: v for k, v in ov.items() if not k.startswith("calibration.")}
-            s2 = scen.with_overrides(_apply_scales(scen, scale_keys) | keys)
-            path = run_scenario(s2, out_dir=Path(args.out) / "full_runs", progress=False)
-            got = _result_channels(path, cmap)
-            return {k: v for k, v in got.items() if v is not None}
-
+        full = _local_runner(scen, cmap, Path(args.out) / "full_runs")
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
             from crashdem.diagnosis.distributed import full_simulator_from_args
 
@@ -370,6 +361,8 @@ def diagnose_command(args: argparse.Namespace) -> int:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
                        baseline_raw=base_raw, **cat_kw)
     rep.simulations["baseline_source"] = source
+    if decimated:  # done here, before the baseline's settings, so diagnose() saw none to do
+        rep.fit["decimated"] = decimated
     rep.fit["recorded_channels"] = {rom: {"recorded": name, "converted": conversions.get(rom)}
                                     for name, rom in cmap.items()}
     paths = write_report(rep, args.out)
@@ -422,20 +415,25 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     keep = ("container.length", "container.width") if box else ("container.diameter",)
     coarse = {k: v for k, v in SEARCH_COARSE.items()
               if not k.startswith("container.") or k in keep}
-    cscen = scen.with_overrides(coarse)
-
-    def search(ov: dict[str, Any]) -> dict[str, Signal]:
-        from crashdem.run import run_scenario
-
-        scale_keys = {k: v for k, v in ov.items() if k.startswith("calibration.")}
-        keys = {k: v for k, v in ov.items() if not k.startswith("calibration.")}
-        s2 = cscen.with_overrides(_apply_scales(cscen, scale_keys) | keys)
-        path = run_scenario(s2, out_dir=out / "search_runs", progress=False)
-        return {k: v for k, v in _result_channels(path, cmap).items() if v is not None}
-
+    search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs")
     return searched, search, (f"{len(searched)} effects at the coarse resolution "
                               f"({', '.join(f'{k}={v:g}' for k, v in coarse.items())}), the "
                               f"leading ones confirmed at the scenario's")
+
+
+def _local_runner(scen, cmap: dict[str, str], out_dir: Path):
+    """``f(overrides) -> channels``: ``scen`` with a hypothesis's overrides
+    (``distributed.scenario_overrides``: ``calibration.*`` factors made absolute) run in this
+    process into ``out_dir``, its diagnosed channels read back (``_result_channels``)."""
+    def run(ov: dict[str, Any]) -> dict[str, Signal]:
+        from crashdem.diagnosis.distributed import scenario_overrides
+        from crashdem.run import run_scenario
+
+        path = run_scenario(scen.with_overrides(scenario_overrides(scen, ov)), out_dir=out_dir,
+                            progress=False)
+        return {k: v for k, v in _result_channels(path, cmap).items() if v is not None}
+
+    return run
 
 
 def _runnable(scen, overrides: dict[str, Any]) -> bool:

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -24,6 +25,9 @@ from crashdem.diagnosis import _dsp
 from crashdem.diagnosis.rom import (ACCEL, VELOCITY, RomParams, RomSettings, run_raw,
                                     sample_grid)
 from crashdem.signal import Signal
+
+if TYPE_CHECKING:
+    from crashdem.diagnosis.rom_planar import PlanarParams
 
 __all__ = ["ConcealedCase", "EFFECT_DRAWS", "TRUTH_DT", "acquire", "acquire_samples",
            "concealed_case", "draw_effect"]
@@ -60,7 +64,8 @@ class ConcealedCase:
     values : the effect's true parameters (ROM fields)
     recalibration : true recalibration scale factors (``rom.SCALE_KEYS``) applied to the truth
     recording : the acquired channels
-    truth : the full truth parameter set
+    truth : the full truth parameter set (``rom.RomParams``; a glider case's
+        ``rom_planar.PlanarParams``, ``generator_planar``)
     """
 
     effect: str | None
@@ -68,7 +73,7 @@ class ConcealedCase:
     recalibration: dict[str, float]
     seed: int
     recording: dict[str, Signal]
-    truth: RomParams
+    truth: RomParams | PlanarParams
     trigger_offset_s: float = 0.0
     meta: dict[str, float] = field(default_factory=dict)
 

@@ -356,11 +356,9 @@ class DemFullSimulator:
         self.scenario = sc.load(SCENARIO, {**BASE_OVERRIDES, **BASELINE_NUMERICS})
 
     def __call__(self, overrides: dict[str, Any]) -> dict[str, Signal]:
-        from crashdem.diagnosis.cli import _apply_scales
+        from crashdem.diagnosis.distributed import scenario_overrides
 
         self.calls += 1
-        scales = {k: v for k, v in overrides.items() if k.startswith("calibration.")}
-        keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
-        fields = {**_apply_scales(self.scenario, scales), **keys}
+        fields = scenario_overrides(self.scenario, overrides)
         sigs, _ = run_dem({**BASELINE_NUMERICS, **fields}, filtered=True, cache=self.cache)
         return sigs

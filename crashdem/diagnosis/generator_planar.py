@@ -27,11 +27,11 @@ model's nose cone ahead of ``glider.NOSE_CUT_STATION``), rear accelerometer 5 cm
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 
-from crashdem.diagnosis.generator import (EFFECT_DRAWS, PRE_TRIGGER, TRIGGER_JITTER,
+from crashdem.diagnosis.generator import (EFFECT_DRAWS, PRE_TRIGGER, TRIGGER_JITTER, ConcealedCase,
                                           acquire_samples, draw_effect)
 from crashdem.diagnosis.rom import SCALE_KEYS, RomParams, RomSettings
 from crashdem.diagnosis.rom_planar import PlanarParams, run_planar_raw, simulate_planar
@@ -71,17 +71,9 @@ PLANAR_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
 }
 
 
-@dataclass(frozen=True)
-class PlanarConcealedCase:
-    """A generated glider recording and its hidden truth (``values``: the effect's parameters)."""
-
-    effect: str | None
-    values: dict[str, float]
-    recalibration: dict[str, float]
-    seed: int
-    recording: dict[str, Signal]
-    truth: PlanarParams
-    trigger_offset_s: float = 0.0
+#: a generated glider recording and its hidden truth: the drop generator's case record, its
+#: ``truth`` a ``PlanarParams``
+PlanarConcealedCase = ConcealedCase
 
 
 def planar_concealed_case(seed: int, effect: str | None, *,

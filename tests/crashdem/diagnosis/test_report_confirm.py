@@ -45,20 +45,8 @@ def test_screen_then_confirm_counts_full_simulations(layering_case):
     """The expensive simulator (here: the truth numerics driven through *scenario keys*, so the
     catalogue's scenario mapping and ``rom_from_scenario`` are exercised) is called once for the
     recalibration and once per confirmed candidate; the concealed effect is confirmed."""
-    scenario = pytest.importorskip("crashdem.scenario")
-    from crashdem.diagnosis.cli import rom_from_scenario
-
-    base_scen = scenario.loads(SCENARIO_TOML)
-    calls = []
-
-    def full(overrides):
-        calls.append(dict(overrides))
-        scales = {k.split(".", 1)[1]: v for k, v in overrides.items() if k.startswith("calibration.")}
-        assert set(scales) <= set(SCALE_KEYS)
-        keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
-        p = rom_from_scenario(base_scen.with_overrides(keys)).with_values(scales)
-        return acquire(p, np.random.default_rng(0), noise={"accel_z": 0.0, "velocity_z": 0.0})
-
+    calls: list = []
+    full = _scenario_rom_simulator(calls)
     top_k = 2
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k,
                               full_search=False)
@@ -98,6 +86,7 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
         if any(overrides.get(f"physics.{e}.enabled") for e in same_as_recording):
             return dict(recording)
         scales = {k.split(".", 1)[1]: v for k, v in overrides.items() if k.startswith("calibration.")}
+        assert set(scales) <= set(SCALE_KEYS)
         keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
         p = rom_from_scenario(base_scen.with_overrides(keys)).with_values(scales)
         return acquire(p, np.random.default_rng(0), noise={"accel_z": 0.0, "velocity_z": 0.0})
