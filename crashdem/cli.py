@@ -135,6 +135,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "scenario itself (full), on the scenario at 0.10 m grains in a 2 m tank "
                         "with the leading levels confirmed at the scenario's resolution "
                         "(coarse), auto = coarse when the scenario is finer, off = none")
+    d.add_argument("--replicates", type=int, default=None, metavar="N",
+                   help="run the baseline with N other packing seeds (scenario.seed + 1 ... + N) "
+                        "on the simulator the search runs on; an effect must fit the recording "
+                        "better than every one of them (the realisation floor; default 4 with "
+                        "the full-model search, 0 = none)")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

@@ -52,6 +52,9 @@ def truth_recording(effect: str, value: float, out: Path, threads: int) -> Path:
           f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value}
     if effect == "cohesion":
         ov["physics.cohesion.shear_strength"] = value
+    if effect == "boundary_proximity" and value <= 1.0:
+        # a floor above the scenario's 1 m layer interface ends the column there: no lower layer
+        ov["physics.soil_layering.enabled"] = False
     raw, _ = run_dem(ov, filtered=False)
     rng = np.random.default_rng(7)
     acc, vel = raw["accel_z"], raw["velocity_z"]

@@ -49,7 +49,7 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
 
     from crashdem.diagnosis import screen_then_confirm
     from crashdem.diagnosis.generator_dem import (DemFullSimulator, dem_baseline_raw,
-                                                  impact_speed)
+                                                  impact_speed, replicates)
 
     t0 = time.perf_counter()
     if filter_class:
@@ -60,7 +60,8 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
         case = yade_case(seed, effect, raw=raw)
     t1 = time.perf_counter()
     rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
-                              impact_speed=impact_speed(), baseline_raw=dem_baseline_raw())
+                              impact_speed=impact_speed(), baseline_raw=dem_baseline_raw(),
+                              replicates=replicates())
     t2 = time.perf_counter()
     top = rep.hypotheses[0]
     claimed = rep.missing_physics
@@ -78,6 +79,7 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
             "fitted": fitted, "parameter_errors": errors,
             "score_before": rep.fit["before"]["overall"], "score_after": after,
             "full_simulations": rep.simulations["full_simulations"],
+            "realisation_floor_delta_bic": rep.fit.get("realisation", {}).get("floor_delta_bic"),
             "grains": case.meta["grains"], "yade_dt_s": case.meta["dt"],
             "case_wall_s": t1 - t0, "diagnosis_wall_s": t2 - t1, "decision": rep.decision}
 

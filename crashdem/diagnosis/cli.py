@@ -350,10 +350,11 @@ def diagnose_command(args: argparse.Namespace) -> int:
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
         searched, search_sim, search_how = _search_setup(
             scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out))
+        reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
-                                  search_simulator=search_sim, **cat_kw)
+                                  search_simulator=search_sim, replicates=reps, **cat_kw)
         rep.simulations["full_search"] = search_how
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
@@ -371,6 +372,25 @@ def diagnose_command(args: argparse.Namespace) -> int:
     for p in paths["plots"]:
         print(p)
     return 0
+
+
+#: replicate packings of the baseline run with the full-model search (the realisation floor,
+#: ``screen_then_confirm(..., replicates=...)``): 4 seeds, on the coarse search tier about a
+#: second each once their beds are deposited
+DEFAULT_REPLICATES = 4
+
+
+def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
+    """``--replicates``: the overrides of the replicate realisations (``scenario.seed`` + 1 ...
+    + n); by default ``DEFAULT_REPLICATES`` when the full-model search runs, else none (they
+    would cost full runs at the scenario's resolution; ask for them explicitly)."""
+    if n is None:
+        n = DEFAULT_REPLICATES if searched else 0
+    if not 0 <= n <= 32:
+        raise ValueError(f"--replicates={n!r}: must be in [0, 32] (replicate packings of the "
+                         f"baseline)")
+    seed = int(scen.get("scenario.seed"))
+    return [{"scenario.seed": seed + i} for i in range(1, n + 1)]
 
 
 #: the coarse resolution of the full-model search (validation/campaign/studies.py "small":
@@ -402,7 +422,8 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         if scen.get(f"physics.{k}.enabled") or (k == "particle_rotation"
                                                 and scen.get("soil.rotation") == "free"):
             continue
-        # levels the scenario cannot take (e.g. a floor above its layering interface) are dropped
+        # levels the scenario cannot take are dropped (a floor above its layering interface is
+        # taken: it ends the column there, distributed.scenario_overrides)
         ok = tuple(x for x in fs.values if _runnable(scen, fs.overrides(x)))
         if len(ok) >= 2:
             searched[k] = replace(fs, values=ok) if ok != fs.values else fs
@@ -439,11 +460,12 @@ def _local_runner(scen, cmap: dict[str, str], out_dir: Path):
 def _runnable(scen, overrides: dict[str, Any]) -> bool:
     """True when the scenario with ``overrides`` is valid and its bed can be specified (the
     checks ``crashdem.run`` makes before any deposition)."""
+    from crashdem.diagnosis.distributed import scenario_overrides
     from crashdem.run import packing_spec
     from crashdem.scenario import ScenarioError
 
     try:
-        packing_spec(scen.with_overrides(overrides))
+        packing_spec(scen.with_overrides(scenario_overrides(scen, overrides)))
     except (ScenarioError, ValueError):
         return False
     return True

@@ -45,12 +45,27 @@ def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str,
     ``calibration.stiffness_scale`` / ``strength_scale`` / ``drag_scale`` factors become
     absolute ``soil.material.young`` / ``friction_angle_deg`` / ``density`` values of
     ``scenario`` (``crashdem.diagnosis.cli._apply_scales``); every other key is a scenario
-    field and is kept.
+    field and is kept. A hypothesis's rigid floor at or above the scenario's own layer
+    interface (``boundary_proximity`` in a layered bed: the reference drop scenarios have the
+    compacted layer at 1 m) ends the soil column before the interface, so the lower layer is
+    not there: the run gets ``physics.soil_layering.enabled = false`` unless the overrides set
+    the layering themselves (before, such a floor was refused by the scenario check and every
+    floor above 1 m went unsearched).
     """
     from crashdem.diagnosis.cli import _apply_scales
 
     scales = {k: v for k, v in overrides.items() if k.startswith("calibration.")}
     keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
+
+    def get(key: str) -> Any:
+        return keys[key] if key in keys else scenario.get(key)
+
+    floor = get("physics.boundary_proximity.floor_depth")
+    if (get("physics.boundary_proximity.enabled") and floor is not None
+            and "physics.soil_layering.enabled" not in keys
+            and get("physics.soil_layering.enabled")
+            and float(floor) <= float(get("physics.soil_layering.depth"))):
+        keys["physics.soil_layering.enabled"] = False
     return _apply_scales(scenario, scales) | keys
 
 

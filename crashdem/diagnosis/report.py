@@ -136,6 +136,18 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         for name, b in (search.get("best") or {}).items():
             lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
                          f"{b['delta_bic_vs_reference']:.1f} |")
+    real = fit.get("realisation")
+    if real and real.get("runs"):
+        lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "
+                  f"on the {real.get('tier')}): an effect is named only when its run fits the "
+                  f"recording better than every replicate (Delta BIC above "
+                  f"{real['floor_delta_bic']:.1f}, score 0.02 above {_fmt(real['floor_score'])}).",
+                  "", "| replicate | score | Delta BIC vs reference |", "|---|---|---|"]
+        for r in real["runs"]:
+            ov = ", ".join(f"{k}={v}" for k, v in (r.get("overrides") or {}).items())
+            db = r.get("delta_bic_vs_reference")
+            lines.append(f"| {ov or '-'} | {_fmt(r.get('score'))} | "
+                         f"{'-' if db is None else f'{db:.1f}'} |")
     sims = d["simulations"]
     lines += ["", "## Cost", "",
               f"Screening runs ({sims['screening_model']}): {sims['screening_runs']}; full simulations: "

@@ -16,6 +16,10 @@ import numpy as np
 import pytest
 
 from crashdem.diagnosis import diagnose, fit
+from crashdem.diagnosis.generator import ACCEPT_PARAM_RTOL as PARAM_RTOL
+from crashdem.diagnosis.generator import ACCEPT_SCORE_AFTER as MIN_SCORE_AFTER
+from crashdem.diagnosis.generator import ACCEPT_SCORE_GAIN as MIN_SCORE_GAIN
+from crashdem.diagnosis.generator import ACCEPT_TOP1_RATE as MIN_TOP1_RATE
 from crashdem.diagnosis.generator import concealed_case
 from crashdem.diagnosis.rom import RomParams, simulate
 
@@ -30,12 +34,6 @@ NULL_SEEDS = (21, 22)
 #: a null case with wrong existing parameters: must come out as recalibration
 RECAL_SEED = 23
 RECAL_TRUTH = {"strength_scale": 1.25, "stiffness_scale": 0.8}
-
-#: issue-7 acceptance numbers
-MIN_TOP1_RATE = 0.90
-PARAM_RTOL = 0.15
-MIN_SCORE_GAIN = 0.10
-MIN_SCORE_AFTER = 0.85
 
 
 @pytest.fixture(scope="module")

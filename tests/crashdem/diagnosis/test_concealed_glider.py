@@ -26,16 +26,16 @@ from collections import Counter
 import pytest
 
 from crashdem.diagnosis import diagnose
+from crashdem.diagnosis.generator import ACCEPT_PARAM_RTOL as PARAM_RTOL
+from crashdem.diagnosis.generator import ACCEPT_SCORE_AFTER as MIN_SCORE_AFTER
+from crashdem.diagnosis.generator import ACCEPT_SCORE_GAIN as MIN_SCORE_GAIN
+from crashdem.diagnosis.generator import ACCEPT_TOP1_RATE as MIN_TOP1_RATE
 from crashdem.diagnosis.generator_planar import (GLIDER_BASE, PLANAR_EFFECT_DRAWS,
                                                  planar_baseline, planar_concealed_case)
 
 EFFECTS = tuple(PLANAR_EFFECT_DRAWS)
 SEEDS = (11, 12)
 NULL_SEEDS = (21, 22)
-MIN_TOP1_RATE = 0.90
-PARAM_RTOL = 0.15
-MIN_SCORE_GAIN = 0.10
-MIN_SCORE_AFTER = 0.85
 #: effects whose parameters are well posed on these recordings (see module notes)
 WELL_POSED = ("boundary_proximity", "cohesion", "sensor_dynamics", "structural_crush",
               "initial_conditions")

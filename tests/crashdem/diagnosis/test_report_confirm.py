@@ -4,6 +4,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,7 +76,8 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
     """A stand-in for the full model: the ROM driven through *scenario keys*
     (``rom_from_scenario``, truth numerics, no noise); the overrides of every call are
     appended to ``calls``. With ``recording``, runs switching on an effect named in
-    ``same_as_recording`` return the recording itself (two effects that fit equally)."""
+    ``same_as_recording`` return the recording itself (two effects that fit equally), and so
+    does a replicate (``scenario.seed`` set) when ``"replicate"`` is among them."""
     scenario = pytest.importorskip("crashdem.scenario")
     from crashdem.diagnosis.cli import rom_from_scenario
 
@@ -83,7 +85,8 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
 
     def full(overrides):
         calls.append(dict(overrides))
-        if any(overrides.get(f"physics.{e}.enabled") for e in same_as_recording):
+        if any(overrides.get(f"physics.{e}.enabled") for e in same_as_recording) or (
+                "replicate" in same_as_recording and "scenario.seed" in overrides):
             return dict(recording)
         scales = {k.split(".", 1)[1]: v for k, v in overrides.items() if k.startswith("calibration.")}
         assert set(scales) <= set(SCALE_KEYS)
@@ -153,6 +156,102 @@ def test_two_effects_that_fit_equally_are_not_told_apart(layering_case):
     assert set(amb) == {"cohesion", "contact_damping"}
     assert rep.missing_physics is None, rep.decision
     assert "neither named" in rep.decision
+
+
+def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
+    """The realisation floor: when another packing of the baseline itself (a replicate, here:
+    it returns the recording) fits the recording as well as an effect does, the effect is not
+    named -- its fit is no better than a realisation's. Without the replicates the same effect
+    is named (the control), so the replicates are what decides."""
+    kw = dict(top_k=2, hypotheses=["cohesion", "contact_damping", "initial_conditions"])
+    rec = layering_case.recording
+    named = screen_then_confirm(simulate(RomParams()), rec, _scenario_rom_simulator(
+        [], rec, same_as_recording=("cohesion",)), **kw)
+    assert named.missing_physics == "cohesion", named.decision
+    assert "realisation" not in named.fit
+    calls: list = []
+    reps = [{"scenario.seed": 2}, {"scenario.seed": 3}]
+    rep = screen_then_confirm(simulate(RomParams()), rec, _scenario_rom_simulator(
+        calls, rec, same_as_recording=("cohesion", "replicate")), replicates=reps, **kw)
+    assert rep.missing_physics is None, rep.decision
+    rf = rep.fit["realisation"]
+    assert rf["tier"] == "full simulator" and len(rf["runs"]) == 2
+    assert [r["overrides"] for r in rf["runs"]] == reps
+    cohesion = max(r["delta_bic_vs_reference"] for r in rep.fit["confirmation"]
+                   if r["hypothesis"] == "cohesion")
+    # the replicate fits exactly as well with one parameter fewer
+    assert rf["floor_delta_bic"] > cohesion > 10.0
+    assert sum("scenario.seed" in c for c in calls) == 2
+    assert "realisation floor of 2 replicate packings" in rep.decision
+    md = write_report(rep, tmp_path, plots=False)["md"]
+    text = Path(md).read_text()
+    assert "Realisation floor (2 replicate packings" in text
+    assert "| scenario.seed=3 |" in text
+
+
+def test_replicates_run_on_the_search_simulator(layering_case):
+    """With a search simulator the replicates run there, next to its baseline run, and set the
+    floor of the promotion; the concealed layering (far above a replicate, which here is the
+    baseline again: the ROM has no packing) is still named, and the full runs stay 1 + top_k."""
+    full_calls: list = []
+    search_calls: list = []
+    reps = [{"scenario.seed": s} for s in (2, 3, 4)]
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording,
+                              _scenario_rom_simulator(full_calls), top_k=2,
+                              search_simulator=_scenario_rom_simulator(search_calls),
+                              replicates=reps)
+    assert len(full_calls) == rep.simulations["full_simulations"] <= 3
+    assert sum("scenario.seed" in c for c in search_calls) == 3
+    assert not any("scenario.seed" in c for c in full_calls)
+    rf = rep.fit["realisation"]
+    assert rf["tier"] == "search simulator" and len(rf["runs"]) == 3
+    assert abs(rf["floor_delta_bic"]) < 1e-9  # the replicate is the search baseline itself
+    assert rep.missing_physics == "soil_layering", rep.decision
+
+
+def test_a_floor_above_the_layer_interface_ends_the_column(tmp_path):
+    """The reference drop scenarios have a compacted layer below 1 m. A hypothesis's rigid floor
+    at or above that interface ends the soil column there, so its run has no lower layer
+    (``distributed.scenario_overrides``); a deeper floor keeps it, and so do overrides that set
+    the layering themselves. The full-model search of such a scenario therefore runs every floor
+    level (before, the 0.6-0.9 m levels failed the scenario check and were dropped)."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import _runnable, _search_setup
+    from crashdem.diagnosis.distributed import scenario_overrides
+    from crashdem.diagnosis.generator_dem import scenario_path
+
+    scen = scenario.load(scenario_path())
+    assert scen.get("physics.soil_layering.enabled")
+    assert scen.get("physics.soil_layering.depth") == 1.0
+    floor = {"physics.boundary_proximity.enabled": True}
+    for depth, layered in ((0.6, False), (1.0, False), (1.05, True), (1.25, True)):
+        ov = scenario_overrides(scen, {**floor, "physics.boundary_proximity.floor_depth": depth})
+        assert ov.get("physics.soil_layering.enabled", True) is layered, depth
+        assert _runnable(scen, ov)
+    own = {**floor, "physics.boundary_proximity.floor_depth": 0.6,
+           "physics.soil_layering.enabled": True}
+    assert scenario_overrides(scen, own)["physics.soil_layering.enabled"] is True
+    assert not _runnable(scen, own)  # a layer interface below the floor is refused
+    searched, _, _ = _search_setup(scen, False, "coarse", {}, tmp_path)
+    assert searched["boundary_proximity"].values == DROP.full_search["boundary_proximity"].values
+    assert "soil_layering" not in searched  # the scenario has it switched on
+
+
+def test_cli_replicates_option():
+    """``--replicates``: seeds scenario.seed + 1 ... + N; by default 4 with the full-model search
+    and none without; a count outside 0-32 is refused naming the option and the range."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.cli import DEFAULT_REPLICATES, _replicates
+
+    scen = scenario.loads(SCENARIO_TOML).with_overrides({"scenario.seed": 7})
+    assert _replicates(scen, None, True) == [{"scenario.seed": 7 + i}
+                                             for i in range(1, DEFAULT_REPLICATES + 1)]
+    assert _replicates(scen, None, False) == []
+    assert _replicates(scen, 2, False) == [{"scenario.seed": 8}, {"scenario.seed": 9}]
+    for bad in (-1, 33):
+        with pytest.raises(ValueError, match=r"--replicates=.*\[0, 32\]"):
+            _replicates(scen, bad, True)
 
 
 def test_full_search_levels_and_vertex():

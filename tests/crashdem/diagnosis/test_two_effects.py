@@ -6,11 +6,10 @@ from __future__ import annotations
 import numpy as np
 
 from crashdem.diagnosis import diagnose
+from crashdem.diagnosis.generator import ACCEPT_PARAM_RTOL as PARAM_RTOL
 from crashdem.diagnosis.generator import acquire
 from crashdem.diagnosis.rom import RomParams, simulate
 
-#: issue-7 parameter tolerance
-PARAM_RTOL = 0.15
 TRUTH = {"interface_depth": 0.18, "strength_ratio": 2.2, "floor_depth": 1.0}
 
 
