@@ -1215,6 +1215,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         candidates = claim + [h for h in candidates if h["name"] != rep.missing_physics][
             :max(0, top_k - len(claim) - len(promote))]
         promoted = [(r["hypothesis"], dict(r["overrides"]), r["search_value"]) for r in promote]
+        s_verdicts = {n: ("promoted to a full run" if any(p is r for p in promote) else
+                          "not promoted: " + _verdict(r, s_floor, False, False, None))
+                      for n, r in best_s.items()}
     requests: list[tuple[str, dict[str, Any], float | None]] = [
         (RECALIBRATION.name, {**RECALIBRATION.scenario_overrides(recal["recalibration"]),
                               **cfc_key}, None)]
@@ -1298,6 +1301,29 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         rep.fit["confirmation_ambiguous"] = {
             r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
                               "score": r["score"]} for r in rivals[:2]}
+    # why each effect run in the full model was or was not named, in one line each
+    model_free = ("the sensor check" if checked else
+                  "the measured impact speed" if speed_measured else None)
+    every = _best_rows(r for r in rows[1:] if "rss" in r and r["hypothesis"] != REPLICATE)
+    verdicts: dict[str, str] = {}
+    for name in dict.fromkeys(r["hypothesis"] for r in rows[1:]):
+        if name in (REPLICATE, RECALIBRATION.name):
+            continue
+        r = best_h.get(name)
+        if name == confirmed:
+            why = "named"
+        elif r is None:
+            err = next((x.get("error") for x in rows if x["hypothesis"] == name and "error" in x),
+                       None)
+            why = (f"the full model could not run it ({err})" if err and name not in every else
+                   "its best run is at the end of the span where the effect fades "
+                   f"({searched[name].parameter} = {every[name]['search_value']:.4g} "
+                   f"{searched[name].unit}, Delta BIC "
+                   f"{every[name]['delta_bic_vs_reference']:.1f}): names nothing")
+        else:
+            why = _verdict(r, floor, screened is r, model_free, ambiguous)
+        verdicts[name] = why
+    rep.fit["confirmation_verdicts"] = verdicts
     if confirmed is not None and "search_value" in best:
         _adopt_full_parameters(rep, best, searched[confirmed], search_rows or rows)
     if skipped:
@@ -1330,6 +1356,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                   for n, r in _best_rows(r for r in lv if "rss" in r).items()})
         if search_simulator is not None:
             rep.fit["full_search"]["search_baseline_score"] = search_rows[0]["score"]
+            rep.fit["full_search"]["verdicts"] = s_verdicts
             rep.simulations["search_simulations"] = len(search_rows)
     rep.fit["confirmation"] = [{k: (None if k == "score" and not math.isfinite(v) else v)
                                 for k, v in r.items() if k != "aligned"} for r in rows]
@@ -1389,6 +1416,32 @@ def _run_full(full_simulator: Simulator, requests: list[tuple[str, dict[str, Any
                 raise
             outs.append(e)
     return outs
+
+
+def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
+             model_free: str | None, ambiguous: list[str] | None) -> str:
+    """One line on why the effect whose best full run is ``r`` was not named (the rules of
+    ``screen_then_confirm``, first failed first); ``model_free`` names a model-free answer
+    that stands (then nothing else is named)."""
+    db, sc = float(r["delta_bic_vs_reference"]), float(r["score"])
+    if model_free:
+        return f"a model-free answer ({model_free}) names another effect"
+    if ambiguous and r["hypothesis"] in ambiguous:
+        return (f"decisive (Delta BIC {db:.1f}) but within Delta BIC {AMBIGUITY_MARGIN:g} of "
+                f"{next(a for a in ambiguous if a != r['hypothesis'])}: not told apart")
+    if is_claim:
+        return (f"the screening's claim, but its full run is decisively worse than the reference "
+                f"or the best replicate (Delta BIC {db:.1f}, score {sc:.3f})")
+    if db <= ACCEPT_MARGIN:
+        return f"Delta BIC {db:.1f} over the reference, not above {ACCEPT_MARGIN:g}"
+    if db - floor["delta_bic"] <= REALISATION_MARGIN:
+        return (f"fits no better than a replicate packing of the baseline (Delta BIC {db:.1f} "
+                f"against the best replicate's {floor['delta_bic']:.1f})")
+    if sc - floor["score"] < CONFIRM_MIN_GAIN:
+        return (f"Delta BIC {db:.1f}, but its score {sc:.3f} is not {CONFIRM_MIN_GAIN:g} above "
+                f"{floor['score']:.3f} (reference and replicates)")
+    return (f"decisive (Delta BIC {db:.1f}, score {sc:.3f}) but another effect ranks higher or "
+            f"the screening's claim stands")
 
 
 def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float) -> dict[str, float]:

@@ -127,6 +127,11 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
             db = r.get("delta_bic_vs_reference")
             lines.append(f"| {r['hypothesis']} | {ov or '-'} | {_fmt(r.get('score'))} | "
                          f"{'-' if db is None else f'{db:.1f}'} |")
+    verdicts = fit.get("confirmation_verdicts")
+    if verdicts:
+        lines += ["", "Why each effect run in the full model was or was not named:", "",
+                  "| effect | verdict |", "|---|---|"]
+        lines += [f"| {name} | {why} |" for name, why in verdicts.items()]
     search = fit.get("full_search")
     if search and search.get("levels"):
         lines += ["", f"Full-model search ({search.get('tier')}, {search.get('runs')} runs): best "
@@ -136,6 +141,9 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         for name, b in (search.get("best") or {}).items():
             lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
                          f"{b['delta_bic_vs_reference']:.1f} |")
+        if search.get("verdicts"):
+            lines += ["", "| effect (search tier) | promotion to a full run |", "|---|---|"]
+            lines += [f"| {n} | {v} |" for n, v in search["verdicts"].items()]
     real = fit.get("realisation")
     if real and real.get("runs"):
         lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "

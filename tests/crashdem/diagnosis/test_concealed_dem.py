@@ -52,10 +52,10 @@ TOP_K = 2
 
 
 GAP = ("DEM truth, measured with the full-model search (2026-11-22, session 7): 10/12 effect "
-       "cases named, no wrong name, cohesion 0/2 (seed 11: contact damping and cohesion beat "
-       "the reference within Delta BIC 2 of each other, neither named; seed 12 below the null "
-       "level); layering depth 28-30 % short (about one grain radius at r = 0.10 m), floor "
-       "depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
+       "cases named, no wrong name, cohesion 0/2 (seed 11: contact damping and cohesion fit "
+       "no better than a replicate packing of the baseline, Delta BIC 18.9 / 18.3 against 28.8; "
+       "seed 12 below the null level); layering depth 28-30 % short (about one grain radius "
+       "at r = 0.10 m), floor depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
        "scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same physics "
        "score against each other; the same with the realisation floor of 4 replicate packings "
        "(session 8); see docs/diagnosis.md 'Validation on DEM truth'")
@@ -185,6 +185,11 @@ def test_dem_realisation_floor(dem_runs):
         assert rf["floor_delta_bic"] >= 0.0
         assert rf["floor_score"] >= r.fit["confirmation_reference_score"]
         floors.append(rf["floor_delta_bic"])
+        # every searched effect gets a one-line verdict; the named one says so
+        why = r.fit["confirmation_verdicts"]
+        assert set(DROP.full_search) <= set(why), (c.effect, c.seed, why)
+        assert [n for n, v in why.items() if v == "named"] == (
+            [r.missing_physics] if r.missing_physics else []), why
         h = next((h for h in r.hypotheses if h["name"] == r.missing_physics), None)
         if h is not None and "full_model" in h:
             assert h["full_model"]["delta_bic_vs_reference"] > rf["floor_delta_bic"]

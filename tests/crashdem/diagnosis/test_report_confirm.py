@@ -156,6 +156,8 @@ def test_two_effects_that_fit_equally_are_not_told_apart(layering_case):
     assert set(amb) == {"cohesion", "contact_damping"}
     assert rep.missing_physics is None, rep.decision
     assert "neither named" in rep.decision
+    for name in amb:
+        assert "not told apart" in rep.fit["confirmation_verdicts"][name]
 
 
 def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
@@ -169,6 +171,7 @@ def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
         [], rec, same_as_recording=("cohesion",)), **kw)
     assert named.missing_physics == "cohesion", named.decision
     assert "realisation" not in named.fit
+    assert named.fit["confirmation_verdicts"]["cohesion"] == "named"
     calls: list = []
     reps = [{"scenario.seed": 2}, {"scenario.seed": 3}]
     rep = screen_then_confirm(simulate(RomParams()), rec, _scenario_rom_simulator(
@@ -183,10 +186,15 @@ def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
     assert rf["floor_delta_bic"] > cohesion > 10.0
     assert sum("scenario.seed" in c for c in calls) == 2
     assert "realisation floor of 2 replicate packings" in rep.decision
+    # and the report says why, per effect
+    why = rep.fit["confirmation_verdicts"]
+    assert why["cohesion"].startswith("fits no better than a replicate packing"), why
+    assert "named" not in why.values()
     md = write_report(rep, tmp_path, plots=False)["md"]
     text = Path(md).read_text()
     assert "Realisation floor (2 replicate packings" in text
     assert "| scenario.seed=3 |" in text
+    assert f"| cohesion | {why['cohesion']} |" in text
 
 
 def test_replicates_run_on_the_search_simulator(layering_case):
@@ -207,6 +215,10 @@ def test_replicates_run_on_the_search_simulator(layering_case):
     assert rf["tier"] == "search simulator" and len(rf["runs"]) == 3
     assert abs(rf["floor_delta_bic"]) < 1e-9  # the replicate is the search baseline itself
     assert rep.missing_physics == "soil_layering", rep.decision
+    verdicts = rep.fit["full_search"]["verdicts"]  # the search tier says what it promoted
+    assert set(verdicts) <= set(rep.fit["full_search"]["best"])
+    assert all(v == "promoted to a full run" or v.startswith("not promoted: ")
+               for v in verdicts.values())
 
 
 def test_a_floor_above_the_layer_interface_ends_the_column(tmp_path):
