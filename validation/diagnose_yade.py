@@ -113,6 +113,7 @@ def main(argv=None) -> int:
                   f"dBIC={r['top_delta_bic']:.1f} score {r['score_before']:.3f} -> "
                   f"{r['score_after']:.3f} fitted={ {k: round(v, 3) for k, v in r['fitted'].items()} } "
                   f"errors={ {k: f'{v:+.0%}' for k, v in r['parameter_errors'].items()} } "
+                  f"realisation floor dBIC={r['realisation_floor_delta_bic'] or 0.0:.1f} "
                   f"full runs={r['full_simulations']} ({r['case_wall_s']:.0f} s + "
                   f"{r['diagnosis_wall_s']:.0f} s)", flush=True)
     for s in ([] if args.raw else args.filter_seeds):

@@ -1216,7 +1216,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             :max(0, top_k - len(claim) - len(promote))]
         promoted = [(r["hypothesis"], dict(r["overrides"]), r["search_value"]) for r in promote]
         s_verdicts = {n: ("promoted to a full run" if any(p is r for p in promote) else
-                          "not promoted: " + _verdict(r, s_floor, False, False, None))
+                          "not promoted: " + _verdict(r, s_floor, False, None, None))
                       for n, r in best_s.items()}
     requests: list[tuple[str, dict[str, Any], float | None]] = [
         (RECALIBRATION.name, {**RECALIBRATION.scenario_overrides(recal["recalibration"]),
