@@ -44,7 +44,7 @@ from crashdem.diagnosis.sensor_check import accel_velocity_check
 from crashdem.signal import Signal
 
 __all__ = ["Report", "confirm", "diagnose", "screen_then_confirm", "write_report", "catalogue",
-           "CATALOGUE", "RECALIBRATION", "working_rate", "MAX_SAMPLE_RATE"]
+           "CATALOGUE", "RECALIBRATION", "working_rate", "MAX_SAMPLE_RATE", "replicate_overrides"]
 
 Simulator = Callable[[dict[str, Any]], Mapping[str, Signal]]
 
@@ -69,6 +69,13 @@ REPLICATE = "replicate"
 #: (median 12); 10 on top of it would drop 2 of the 16 named effects (a damping and a floor
 #: beating it by 2.0 / 2.4) and prevent no wrong claim, see docs/diagnosis.md
 REALISATION_MARGIN = 0.0
+
+
+def replicate_overrides(seed: int, n: int) -> list[dict[str, Any]]:
+    """Overrides of ``n`` replicate realisations of a baseline whose packing seed is ``seed``:
+    ``scenario.seed`` = seed + 1 ... seed + n (``screen_then_confirm``'s ``replicates``)."""
+    return [{"scenario.seed": int(seed) + i} for i in range(1, int(n) + 1)]
+
 #: a measured impact-speed offset of at least this many standard deviations is model-free
 #: evidence for ``initial_conditions`` (like the sensor check): the claim stands whatever the
 #: soil model's realisation scatter
@@ -1202,11 +1209,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         s_floor = _realisation_floor(search_rows, float(rep.fit["before"]["overall"]))
         best_s = _best_rows(r for r in search_rows[1:]
                             if located(r) and r["hypothesis"] != REPLICATE)
-        promote = sorted((r for r in best_s.values()
-                          if r["delta_bic_vs_reference"] > ACCEPT_MARGIN
-                          and (r["delta_bic_vs_reference"] - s_floor["delta_bic"]
-                               > REALISATION_MARGIN)
-                          and r["score"] - s_floor["score"] >= CONFIRM_MIN_GAIN),
+        promote = sorted((r for r in best_s.values() if _decisive(r, s_floor)),
                          key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
         # the full runs stay 1 + top_k: the screening's claim, then the promoted levels, then
         # the other screened candidates
@@ -1261,14 +1264,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             qualify(r)
         rows += extra
     t_full = time.perf_counter() - t_full
-    # the realisation floor: the best replicate of the baseline (no replicates: the reference)
-    floor = (_realisation_floor(rows, reference) if search_simulator is None
-             else {"delta_bic": 0.0, "score": reference})
-
-    def decisive(r):  # the full run beats the reference and the replicates in both
-        return (r["score"] - floor["score"] >= CONFIRM_MIN_GAIN
-                and r["delta_bic_vs_reference"] > ACCEPT_MARGIN
-                and r["delta_bic_vs_reference"] - floor["delta_bic"] > REALISATION_MARGIN)
+    # the realisation floor: the best replicate of the baseline among the full runs (none
+    # there, e.g. when they ran on the search simulator: the reference)
+    floor = _realisation_floor(rows, reference)
 
     best_h = _best_rows(r for r in rows[1:] if located(r) and r["hypothesis"] != REPLICATE)
     cands = list(best_h.values())
@@ -1284,7 +1282,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         # model-free answer (sensor check, measured impact speed) stands as it is
         confirmed, best = screened["hypothesis"], screened
     rivals = [] if checked or speed_measured else sorted(
-        (r for r in cands if r is not screened and decisive(r)),
+        (r for r in cands if r is not screened and _decisive(r, floor)),
         key=lambda r: -r["delta_bic_vs_reference"])
     ambiguous = None
     if rivals:
@@ -1442,6 +1440,16 @@ def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
                 f"{floor['score']:.3f} (reference and replicates)")
     return (f"decisive (Delta BIC {db:.1f}, score {sc:.3f}) but another effect ranks higher or "
             f"the screening's claim stands")
+
+
+def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
+    """A scored run beats the reference (Delta BIC > ``ACCEPT_MARGIN``) and the realisation
+    ``floor`` (Delta BIC above the best replicate's by ``REALISATION_MARGIN``, score by
+    ``CONFIRM_MIN_GAIN`` above the best of reference and replicates): the rule for naming a
+    full run and for promoting a search-tier level to one."""
+    db = r["delta_bic_vs_reference"]
+    return (db > ACCEPT_MARGIN and db - floor["delta_bic"] > REALISATION_MARGIN
+            and r["score"] - floor["score"] >= CONFIRM_MIN_GAIN)
 
 
 def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float) -> dict[str, float]:

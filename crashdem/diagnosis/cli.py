@@ -389,8 +389,9 @@ def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
     if not 0 <= n <= 32:
         raise ValueError(f"--replicates={n!r}: must be in [0, 32] (replicate packings of the "
                          f"baseline)")
-    seed = int(scen.get("scenario.seed"))
-    return [{"scenario.seed": seed + i} for i in range(1, n + 1)]
+    from crashdem.diagnosis import replicate_overrides
+
+    return replicate_overrides(scen.get("scenario.seed"), n)
 
 
 #: the coarse resolution of the full-model search (validation/campaign/studies.py "small":
@@ -430,7 +431,8 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     box = scen.get("container.shape") == "box"
     size = max(scen.get("container.length"), scen.get("container.width")) if box \
         else scen.get("container.diameter")
-    finer = scen.get("soil.radius") < SEARCH_COARSE["soil.radius"] * 0.999 or size > 2.0 * 1.001
+    finer = (scen.get("soil.radius") < SEARCH_COARSE["soil.radius"] * 0.999
+             or size > SEARCH_COARSE["container.diameter"] * 1.001)
     if mode == "full" or (mode == "auto" and not finer):
         return searched, None, f"{len(searched)} effects on the scenario itself"
     keep = ("container.length", "container.width") if box else ("container.diameter",)

@@ -52,7 +52,7 @@ from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
 from crashdem.signal import Signal
 
 __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
-           "REPLICATE_SEEDS", "replicates",
+           "replicates",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
            "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS"]
 
@@ -244,14 +244,15 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
     return sigs, info
 
 
-#: packing seeds of the replicate realisations of the baseline (``screen_then_confirm``'s
-#: ``replicates``: the realisation floor); the baseline's is ``BASELINE_NUMERICS["scenario.seed"]``
-REPLICATE_SEEDS = (2, 3, 4, 5)
-
-
 def replicates() -> list[dict[str, Any]]:
-    """Overrides of the baseline's replicate realisations (another packing seed each)."""
-    return [{"scenario.seed": s} for s in REPLICATE_SEEDS]
+    """Overrides of the baseline's replicate realisations, as ``crashdem diagnose`` makes them
+    (``cli.DEFAULT_REPLICATES`` packing seeds after the baseline's
+    ``BASELINE_NUMERICS["scenario.seed"]``: 2-5): the realisation floor of
+    ``screen_then_confirm``."""
+    from crashdem.diagnosis import replicate_overrides
+    from crashdem.diagnosis.cli import DEFAULT_REPLICATES
+
+    return replicate_overrides(BASELINE_NUMERICS["scenario.seed"], DEFAULT_REPLICATES)
 
 
 def impact_speed() -> float:

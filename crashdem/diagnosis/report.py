@@ -48,6 +48,8 @@ def _fmt(v: float | None, nd: int = 3) -> str:
 
 def to_markdown(report, plots: list[str] | None = None) -> str:
     """A readable summary of the report."""
+    from crashdem.diagnosis import CONFIRM_MIN_GAIN
+
     d = report.to_dict()
     fit = d["fit"]
     lines = ["# crashdem diagnosis report", ""]
@@ -149,7 +151,8 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "
                   f"on the {real.get('tier')}): an effect is named only when its run fits the "
                   f"recording better than every replicate (Delta BIC above "
-                  f"{real['floor_delta_bic']:.1f}, score 0.02 above {_fmt(real['floor_score'])}).",
+                  f"{real['floor_delta_bic']:.1f}, score {CONFIRM_MIN_GAIN:g} above "
+                  f"{_fmt(real['floor_score'])}).",
                   "", "| replicate | score | Delta BIC vs reference |", "|---|---|---|"]
         for r in real["runs"]:
             ov = ", ".join(f"{k}={v}" for k, v in (r.get("overrides") or {}).items())
