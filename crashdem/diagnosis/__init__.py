@@ -1281,6 +1281,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         # confirm anything) or another candidate's full run is decisively better than it; a
         # model-free answer (sensor check, measured impact speed) stands as it is
         confirmed, best = screened["hypothesis"], screened
+    claim_stood = confirmed is not None
     rivals = [] if checked or speed_measured else sorted(
         (r for r in cands if r is not screened and _decisive(r, floor)),
         key=lambda r: -r["delta_bic_vs_reference"])
@@ -1310,6 +1311,10 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         r = best_h.get(name)
         if name == confirmed:
             why = "named"
+        elif r is not None and r is screened and claim_stood:
+            why = (f"the screening's claim stood (Delta BIC {r['delta_bic_vs_reference']:.1f}, "
+                   f"score {r['score']:.3f}), but {confirmed}'s full run beats it by "
+                   f"{CONFIRM_MIN_GAIN:g} in score and the reference decisively")
         elif r is None:
             err = next((x.get("error") for x in rows if x["hypothesis"] == name and "error" in x),
                        None)
@@ -1319,7 +1324,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                    f"{searched[name].unit}, Delta BIC "
                    f"{every[name]['delta_bic_vs_reference']:.1f}): names nothing")
         else:
-            why = _verdict(r, floor, screened is r, model_free, ambiguous)
+            why = _verdict(r, floor, r is screened, model_free, ambiguous)
         verdicts[name] = why
     rep.fit["confirmation_verdicts"] = verdicts
     if confirmed is not None and "search_value" in best:
@@ -1419,8 +1424,9 @@ def _run_full(full_simulator: Simulator, requests: list[tuple[str, dict[str, Any
 def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
              model_free: str | None, ambiguous: list[str] | None) -> str:
     """One line on why the effect whose best full run is ``r`` was not named (the rules of
-    ``screen_then_confirm``, first failed first); ``model_free`` names a model-free answer
-    that stands (then nothing else is named)."""
+    ``screen_then_confirm``, first failed first); ``is_claim``: ``r`` is the screening's claim
+    and did not stand (a claim that stood and was replaced is worded by the caller);
+    ``model_free`` names a model-free answer that stands (then nothing else is named)."""
     db, sc = float(r["delta_bic_vs_reference"]), float(r["score"])
     if model_free:
         return f"a model-free answer ({model_free}) names another effect"

@@ -48,7 +48,7 @@ def _fmt(v: float | None, nd: int = 3) -> str:
 
 def to_markdown(report, plots: list[str] | None = None) -> str:
     """A readable summary of the report."""
-    from crashdem.diagnosis import CONFIRM_MIN_GAIN
+    from crashdem.diagnosis import CONFIRM_MIN_GAIN, REPLICATE
 
     d = report.to_dict()
     fit = d["fit"]
@@ -122,7 +122,7 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                   f"{fit.get('confirmed_missing_physics') or 'none'}.", "",
                   "| run | scenario overrides | score | Delta BIC vs reference |", "|---|---|---|---|"]
         for r in conf:
-            if "search_value" in r:
+            if "search_value" in r or r["hypothesis"] == REPLICATE:  # their own tables below
                 continue
             ov = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}"
                            for k, v in (r.get("overrides") or {}).items())

@@ -197,6 +197,33 @@ def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
     assert f"| cohesion | {why['cohesion']} |" in text
 
 
+def test_verdict_of_a_screening_claim_that_another_effect_replaces(layering_case):
+    """The screening claims the layering; its full run (here: 80 % of its change on the baseline,
+    so better than the reference but not exact) stands, but a searched cohesion level
+    reproduces the recording and replaces it. The layering's verdict says so -- not that its
+    run was decisively worse."""
+    from crashdem.signal import Signal
+
+    inner = _scenario_rom_simulator([], layering_case.recording, same_as_recording=("cohesion",))
+
+    def full(ov):
+        out = inner(ov)
+        if not ov.get("physics.soil_layering.enabled"):
+            return out
+        off = inner({k: v for k, v in ov.items() if not k.startswith("physics.soil_layering.")})
+        return {ch: Signal(ch, s.t, 0.8 * s.data + 0.2 * off[ch].data, s.unit, s.cfc)
+                for ch, s in out.items()}
+
+    rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=2,
+                              hypotheses=["soil_layering", "cohesion", "initial_conditions"])
+    assert rep.hypotheses[0]["name"] == "soil_layering"  # the screening's claim
+    assert rep.missing_physics == "cohesion", rep.decision
+    why = rep.fit["confirmation_verdicts"]
+    assert why["cohesion"] == "named"
+    assert why["soil_layering"].startswith("the screening's claim stood"), why
+    assert "cohesion's full run beats it" in why["soil_layering"]
+
+
 def test_replicates_run_on_the_search_simulator(layering_case):
     """With a search simulator the replicates run there, next to its baseline run, and set the
     floor of the promotion; the concealed layering (far above a replicate, which here is the
