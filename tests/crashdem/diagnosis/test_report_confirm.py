@@ -297,7 +297,7 @@ def test_full_search_levels_and_vertex():
     """``FullSearch``: levels must ascend, a log scale needs positive levels; ``located``
     excludes the last level towards the fading end and the interval before it; the refinement
     vertex of an exact parabola in Delta BIC is its maximum."""
-    from crashdem.diagnosis import _search_vertex
+    from crashdem.diagnosis.confirm import _search_vertex
     from crashdem.diagnosis.catalogue import FullSearch
 
     with pytest.raises(ValueError, match="ascending"):
@@ -570,3 +570,30 @@ def test_result_channels_ignore_a_failed_sensor_elsewhere_in_the_run(tmp_path):
     assert got["accel_z"] is None  # no rear_accel_z in this run
     assert np.array_equal(got["accel_x"].data, want) and got["accel_x"].cfc == 60.0
     assert got["pitch_rate"].unit == "rad/s"
+
+
+def test_library_screening_model_follows_the_given_impact_speed():
+    """``diagnose(base, rec, impact_speed=v)`` without ``rom_base`` screens with the sphere drop
+    at ``v`` (a 5 m drop here, not the default 16.4 m/s), so it reproduces the baseline without
+    a model-error floor; a +3 m/s offset of a 9.9 m/s impact is
+    measured and named, its value within 2 %; a ``rom_base`` at another speed than
+    ``impact_speed`` is refused, naming both. Oracle: the truth's offset. Measured before the
+    fix, on a Yade recording of a 5 m drop with +3.25 m/s: the screening model at 16.4 m/s read
+    the impact as model error (8.8 g RMS) and named nothing."""
+    from crashdem.diagnosis import _drop_rom
+
+    v = math.sqrt(2.0 * 9.81 * 5.0)
+    base = simulate(RomParams(impact_speed=v))
+    rec = acquire(RomParams(impact_speed=v, speed_offset=3.0), np.random.default_rng(5))
+    rep = diagnose(base, rec, impact_speed=v)
+    # the screening model reproduces the (ROM) baseline: no model-error floor (at 16.4 m/s:
+    # 193 m/s^2 against a 473 m/s^2 peak, measured)
+    peak = float(np.max(np.abs(base["accel_z"].data)))
+    assert rep.fit.get("model_error", {}).get("accel_z", {}).get("sigma", 0.0) < 0.05 * peak
+    assert rep.missing_physics == "initial_conditions", rep.decision
+    h = next(h for h in rep.hypotheses if h["name"] == "initial_conditions")
+    assert h["parameters"]["speed_offset"] == pytest.approx(3.0, rel=0.02)
+    assert _drop_rom(None, v).v0 == pytest.approx(v)
+    assert _drop_rom(None, None) == RomParams()
+    with pytest.raises(ValueError, match=r"impact_speed=9\.9.*rom_base\.v0 is 16\.4"):
+        diagnose(base, rec, impact_speed=v, rom_base=RomParams())

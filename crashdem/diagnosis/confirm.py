@@ -1,0 +1,748 @@
+"""Step 5 of the diagnosis: confirm the screening with the full simulator.
+
+:func:`screen_then_confirm` runs :func:`crashdem.diagnosis.diagnose` (the screening) and then
+the expensive simulator, in three stages that each have their own function here:
+
+1. **search tier** (:meth:`_Confirmation.search_tier`, only with a ``search_simulator``): every
+   level of the catalogue's full-model search on a cheaper simulator, anchored on the baseline
+   simulation, judged against that simulator's replicate floor; its decisive leaders are
+   promoted to full runs;
+2. **full tier** (:meth:`_Confirmation.full_tier`): the recalibrated run, the screened
+   candidates, the promoted levels or (without a search simulator) every search level and the
+   replicates, scored against the recording with the diagnosis's weights (Delta BIC against
+   the reference, ISO/TS 18571 score);
+3. **decision** (:meth:`_Confirmation.decide`): the screening's claim stands, a decisive rival
+   replaces it, or nothing is named; every searched effect gets a one-line verdict
+   (:meth:`_Confirmation.verdicts`), and :meth:`_Confirmation.record` writes it all into the
+   report.
+
+A run is a *row*: ``{"hypothesis", "overrides", "score", "per_channel", "aligned", "rss",
+"delta_bic_vs_reference"[, "search_value", "refined", "anchored", "error"]}``.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from typing import Any, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from crashdem.diagnosis import (FILTER_CLASS_VARIANT, Report, Simulator, _at_off, _si, catalogue,
+                                diagnose)
+from crashdem.diagnosis.catalogue import RECALIBRATION
+from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
+from crashdem.diagnosis.mismatch import align, onset_time
+from crashdem.signal import Signal
+
+__all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
+           "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides"]
+
+#: a full simulation must raise the overall score over the baseline by this much to confirm
+CONFIRM_MIN_GAIN = 0.02
+#: two decisive full runs of different effects within this Delta BIC of each other are not
+#: told apart (Kass & Raftery 1995: 0-2 is "not worth more than a bare mention"); neither is
+#: named unless the screening claimed one of them
+AMBIGUITY_MARGIN = 2.0
+#: full-model search on a separate (cheaper) simulator: this many leading effects that beat
+#: its baseline decisively are run with the full simulator
+SEARCH_PROMOTE = 2
+#: name of the replicate-realisation runs (the baseline with another packing seed) in the
+#: confirmation table: they stand for no physics, only for the scatter of the realisation
+REPLICATE = "replicate"
+#: a decisive full run must beat the best replicate by this much in BIC (besides the reference
+#: by ACCEPT_MARGIN): with R replicates, a run that fits better than every one of them is an
+#: outlier of the realisation scatter at about 1 / (R + 1) (exchangeability); measured on the
+#: 28 searched DEM / Yade / raw-Yade cases with 4 replicates: a floor of Delta BIC 0-57
+#: (median 12); 10 on top of it would drop 2 of the 16 named effects (a damping and a floor
+#: beating it by 2.0 / 2.4) and prevent no wrong claim, see docs/diagnosis.md
+REALISATION_MARGIN = 0.0
+#: a measured impact-speed offset of at least this many standard deviations is model-free
+#: evidence for ``initial_conditions`` (like the sensor check): the claim stands whatever the
+#: soil model's realisation scatter
+SPEED_CHECK_SIGMAS = 5.0
+
+Row = dict[str, Any]
+Request = tuple[str, dict[str, Any], "float | None"]
+
+
+def replicate_overrides(seed: int, n: int) -> list[dict[str, Any]]:
+    """Overrides of ``n`` replicate realisations of a baseline whose packing seed is ``seed``:
+    ``scenario.seed`` = seed + 1 ... seed + n (``screen_then_confirm``'s ``replicates``)."""
+    return [{"scenario.seed": int(seed) + i} for i in range(1, int(n) + 1)]
+
+
+def screen_then_confirm(baseline_signals: Mapping[str, Signal],
+                        recording_signals: Mapping[str, Signal],
+                        full_simulator: Simulator, *, top_k: int = 2,
+                        full_search: bool | Mapping[str, catalogue.FullSearch] = True,
+                        search_simulator: Simulator | None = None,
+                        replicates: Sequence[Mapping[str, Any]] = (),
+                        **diagnose_kw) -> Report:
+    """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
+
+    Parameters
+    ----------
+    baseline_signals, recording_signals : as for :func:`crashdem.diagnosis.diagnose`
+    full_simulator : ``f(overrides: dict) -> dict[str, Signal]`` taking *scenario* keys
+        (``physics.<name>.*``, ``calibration.*_scale``), e.g. a wrapper around ``crashdem.run``;
+        when it has a ``map(list_of_overrides) -> list_of_signals`` method (e.g.
+        ``distributed.DaskFullSimulator``) the runs are requested as one batch
+    top_k : number of missing-physics hypotheses confirmed (each costs one full simulation)
+    full_search : also run, unless a model-free sensor answer stands, every effect of the
+        catalogue's ``full_search`` (or of the mapping given) at its levels in the full model's
+        own terms (``catalogue.FullSearch``; drop: 22 runs) plus one refinement run of the
+        leading effect; each effect is then judged by its best run
+    search_simulator : run the search on this cheaper simulator instead (e.g. the scenario at
+        a coarser resolution), each run anchored on the baseline simulation (baseline + its
+        change against the search simulator's own baseline run, ``{}``); the best level of each
+        of the ``SEARCH_PROMOTE`` leading effects that beat the baseline decisively is then run
+        with ``full_simulator`` and judged like any candidate, in the place of the screened
+        candidates other than the screening's claim (the full runs stay 1 + ``top_k``)
+    replicates : overrides of other realisations of the baseline itself (e.g.
+        ``[{"scenario.seed": 2}, {"scenario.seed": 3}]``: another packing), run with the
+        simulator the search runs on (the full one without ``search_simulator``). They change
+        no physics, so how well the best of them fits the recording is the **realisation
+        floor**: an effect is decisive only when it also beats the best replicate by
+        ``REALISATION_MARGIN`` in BIC and ``CONFIRM_MIN_GAIN`` in score, and the screening's
+        claim stands only when it is not decisively worse than it (``fit.realisation``); a
+        model-free answer (sensor check, a measured impact-speed offset of at least
+        ``SPEED_CHECK_SIGMAS``) stands without it. On the
+        search simulator the floor applies to the promotion of its levels (the full model's
+        resolution has its own scatter)
+    diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
+
+    Returns
+    -------
+    Report, with ``simulations["full_simulations"]`` and a ``confirmation`` table in ``fit``.
+    Candidates are confirmed when the screening claims missing physics *or* when the
+    recalibration leaves a residual above the total (sensor + model) error
+    (``fit["recalibration_unexplained"]``: the screening model may be too coarse to claim what
+    the full simulation can show). Each candidate is run as its effect alone on the baseline
+    scenario and compared with the reference, the better of the baseline and the full
+    recalibrated run (BIC of the weighted residual with the diagnosis's sensor and model-error
+    weights and n_eff; ISO/TS 18571 score). The screening's claim stands unless its full run is
+    worse than the reference by more than ``ACCEPT_MARGIN`` in BIC; another candidate replaces
+    it (or is named when the screening claimed nothing) when its full run beats the reference by
+    ``ACCEPT_MARGIN`` in BIC and ``CONFIRM_MIN_GAIN`` in score, and beats the claim's full run
+    by ``CONFIRM_MIN_GAIN`` in score; among several such rivals the highest Delta BIC wins.
+    With ``full_search`` each effect's best run (screened value, search levels, refinement)
+    stands for it, and a named searched effect reports the full model's value of its main
+    parameter (``hypotheses[*].full_model``; it replaces the screening's value when both mean
+    the same, e.g. a floor or interface depth).
+    """
+    rep = diagnose(baseline_signals, recording_signals, **diagnose_kw)
+    c = _Confirmation(rep, top_k, full_search, diagnose_kw.get("hypotheses"), replicates)
+    t_full = time.perf_counter()
+    tier = (c.search_tier(search_simulator) if c.searched and search_simulator is not None
+            else None)
+    full = c.full_tier(full_simulator, tier)
+    t_full = time.perf_counter() - t_full
+    d = c.decide(full)
+    c.record(full, tier, d, t_full)
+    return rep
+
+
+@dataclass
+class _SearchTier:
+    """Outcome of the search tier: its rows (the search simulator's baseline run first), its
+    realisation floor, the promoted levels as full-run requests, the candidates kept and the
+    per-effect promotion verdicts."""
+
+    rows: list[Row]
+    floor: dict[str, float]
+    promoted: list[Request]
+    candidates: list[dict[str, Any]]
+    verdicts: dict[str, str]
+
+
+@dataclass
+class _FullTier:
+    """Outcome of the full tier: every full run (the recalibrated run first), the reference
+    score (the better of baseline simulation and recalibrated run) and the realisation floor."""
+
+    rows: list[Row]
+    reference: float
+    floor: dict[str, float]
+
+
+@dataclass
+class _Decision:
+    """What the confirmation names: ``confirmed`` (or None) and the run standing for the final
+    answer (``best``: the recalibrated run when nothing is named), the screened claim's best
+    run, whether it stood, the ambiguous pair and the best run of each effect."""
+
+    confirmed: str | None
+    best: Row
+    screened: Row | None
+    claim_stood: bool
+    ambiguous: list[str] | None
+    best_by_effect: dict[str, Row] = field(default_factory=dict)
+
+
+class _Confirmation:
+    """One confirmation of a screened report: what is run, how a run is scored, what is named."""
+
+    def __init__(self, rep: Report, top_k: int,
+                 full_search: bool | Mapping[str, catalogue.FullSearch],
+                 allowed: Sequence[str] | None, replicates: Sequence[Mapping[str, Any]]):
+        self.rep = rep
+        self.chans = rep.channels
+        self.primary = self.chans[0]
+        by_name = {h["name"]: h for h in rep.hypotheses}
+        self.recal = by_name[RECALIBRATION.name]
+        fclass = rep.fit.get("filter_class") or {}
+        # every full run is filtered at the recording's class (instrumentation.cfc), as the
+        # screening compared it
+        self.cfc_key = ({"instrumentation.cfc": float(fclass["class"])}
+                        if fclass.get("mismatch") and fclass.get("class") is not None else {})
+        # a sensor found by the model-free accelerometer/velocity check (or the noise
+        # spectrum) needs no soil model: its full run only adds granular noise to the same
+        # conclusion
+        self.checked = (rep.missing_physics == "sensor_dynamics"
+                        and (bool(rep.fit.get("sensor_check", {}).get("detected"))
+                             or bool(fclass.get("mismatch"))))
+        spd = rep.fit.get("impact_speed_check") or {}
+        self.speed_measured = bool(rep.missing_physics == "initial_conditions" and spd.get("used")
+                                   and abs(spd["offset"]) >= SPEED_CHECK_SIGMAS * spd["sigma"])
+        self.model_free = ("the sensor check" if self.checked else
+                           "the measured impact speed" if self.speed_measured else None)
+        self.top_k = top_k
+        self.skipped: dict[str, str] = {}
+        self.candidates = self._candidates()
+        # the search runs even when the recalibration explains the recording within the total
+        # error: the screening model's error floor can hide what the full model resolves
+        if self.checked or not full_search:
+            searched: dict[str, catalogue.FullSearch] = {}
+        elif isinstance(full_search, Mapping):
+            searched = dict(full_search)
+        else:
+            searched = dict(rep.catalogue.full_search)
+        if allowed is not None:
+            searched = {k: v for k, v in searched.items() if k in allowed}
+        self.searched = searched
+        # the replicates only run when there is something for their floor to judge
+        self.replicates = ([dict(rv) for rv in replicates]
+                           if not self.checked and (searched or self.candidates) else [])
+        self.n_eff = float(rep.fit["n_effective"])
+        self.n_res = float(rep.fit["n_samples"])
+
+    def _candidates(self) -> list[dict[str, Any]]:
+        """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
+        screening claims missing physics or the recalibration leaves an unexplained residual;
+        one the full model cannot run is skipped (``skipped``) and the next takes its place."""
+        rep = self.rep
+        lacks = rep.catalogue.full_unsupported
+        out: list[dict[str, Any]] = []
+        if rep.missing_physics is None and not rep.fit.get("recalibration_unexplained", False):
+            return out
+        for h in rep.hypotheses:
+            missing = [e for e in h["name"].split("+") if e in lacks]
+            if h["name"] == RECALIBRATION.name or len(out) == self.top_k:
+                continue
+            if missing:
+                self.skipped[h["name"]] = lacks[missing[0]]
+                continue
+            out.append(h)
+        return out
+
+    # -- scoring a run -------------------------------------------------------------------
+
+    def rated(self, al: Mapping[str, Signal]) -> Row:
+        """Per-channel and overall scores of channels aligned on the recording."""
+        rec = self.rep.recording
+        win = tuple(self.rep.fit["score_window_s"])
+        per = {ch: score_signals(rec[ch], al[ch], win) for ch in self.chans}
+        return {"score": float(np.mean([v["score"] for v in per.values()])),
+                "per_channel": per, "aligned": dict(al)}
+
+    def bic(self, rss: float, k: int) -> float:
+        """BIC of a weighted residual sum of squares with ``k`` fitted parameters."""
+        return self.n_eff * math.log(max(rss, 1e-300) / self.n_res) + k * math.log(self.n_eff)
+
+    def row(self, name: str, ov: dict[str, Any], x: float | None, out: Any) -> Row:
+        """The scored row of a run (``out``: its signals, or the exception it raised)."""
+        if isinstance(out, Exception):
+            r: Row = {"hypothesis": name, "overrides": ov, "score": -math.inf, "error": str(out)}
+        else:
+            out = _si(out)
+            rec = self.rep.recording
+            shift = (onset_time(rec[self.primary], self.rep.noise[self.primary].sigma)
+                     - onset_time(out[self.primary], 0.0))
+            r = {"hypothesis": name, "overrides": ov,
+                 **self.rated({ch: align(rec[ch], out[ch], shift) for ch in self.chans})}
+        if x is not None:
+            r["search_value"] = x
+        if "aligned" in r:
+            r["rss"] = _full_rss(self.rep, r["aligned"])
+        return r
+
+    def run(self, sim: Simulator, requests: list[Request]) -> list[Row]:
+        """Scored rows of ``requests`` run on ``sim`` (one batch when it has ``map``)."""
+        outs = _run_full(sim, [(n, ov) for n, ov, _ in requests])
+        return [self.row(n, ov, x, o) for (n, ov, x), o in zip(requests, outs)]
+
+    def levels(self, names: Sequence[str]) -> list[Request]:
+        """Requests of every search level of the effects ``names``."""
+        return [(n, {**self.searched[n].overrides(x), **self.cfc_key}, float(x))
+                for n in names for x in self.searched[n].values]
+
+    def replicate_requests(self) -> list[Request]:
+        """Requests of the replicate realisations of the baseline."""
+        return [(REPLICATE, {**rv, **self.cfc_key}, None) for rv in self.replicates]
+
+    def located(self, r: Row) -> bool:
+        """A scored run that can stand for its effect: not a search run at the end of the span
+        where the effect fades (``FullSearch.located``)."""
+        return "rss" in r and not ("search_value" in r and r["hypothesis"] in self.searched
+                                   and not self.searched[r["hypothesis"]].located(
+                                       r["search_value"]))
+
+    def anchored(self, r: Row, ref: Row) -> Row:
+        """Run ``r`` of another simulator as the baseline simulation plus its change against
+        that simulator's baseline run ``ref`` (both aligned on the recording)."""
+        if "aligned" not in r or "aligned" not in ref:
+            return r
+        base = self.rep.baseline
+        al = {ch: Signal(ch, base[ch].t, base[ch].data + r["aligned"][ch].data
+                         - ref["aligned"][ch].data, base[ch].unit, base[ch].cfc)
+              for ch in self.chans}
+        return {**r, **self.rated(al), "anchored": True, "rss": _full_rss(self.rep, al)}
+
+    def refined(self, sim: Simulator, rows: list[Row]) -> list[Row]:
+        """One run of the leading searched effect at the vertex of the parabola through its
+        best level and the two neighbours (in the search coordinate), when interior; the
+        caller gives it its Delta BIC."""
+        lead = _best_rows(r for r in rows if "search_value" in r and r["hypothesis"] in self.searched
+                          and self.located(r))
+        if not lead:
+            return []
+        top = max(lead.values(), key=lambda r: r["delta_bic_vs_reference"])
+        v = _search_vertex(top, rows, self.searched[top["hypothesis"]])
+        if v is None:
+            return []
+        name = top["hypothesis"]
+        extra = self.run(sim, [(name, {**self.searched[name].overrides(v["value"]),
+                                       **self.cfc_key}, v["value"])])[0]
+        extra["refined"] = True
+        return [extra]
+
+    # -- the stages ----------------------------------------------------------------------
+
+    def search_tier(self, sim: Simulator) -> _SearchTier:
+        """Every level on the cheaper search simulator, judged against that simulator's own
+        baseline run; the leading effects' best levels go to the full model."""
+        rep = self.rep
+        req = ([("baseline", dict(self.cfc_key), None)] + self.levels(list(self.searched))
+               + self.replicate_requests())
+        outs = _run_full(sim, [(n, ov) for n, ov, _ in req])
+        if isinstance(outs[0], Exception):
+            raise outs[0]
+        raw = [self.row(n, ov, x, o) for (n, ov, x), o in zip(req, outs)]
+        ref = raw[0]
+        # anchored like the screening: each search run predicts the baseline simulation plus
+        # the change its effect makes in the search simulator (its run minus that simulator's
+        # baseline run), so the search simulator's own misfit is not read as an effect
+        rows = [ref] + [self.anchored(r, ref) for r in raw[1:]]
+        base_bic = self.bic(_full_rss(rep, rep.baseline), 0)
+
+        def qualify(r: Row) -> None:
+            if "rss" in r:
+                k = int(r["hypothesis"] != REPLICATE)  # a level carries one parameter
+                r["delta_bic_vs_reference"] = base_bic - self.bic(r["rss"], k)
+
+        for r in rows[1:]:
+            qualify(r)
+        extra = [self.anchored(r, ref) for r in self.refined(sim, rows)]
+        for r in extra:
+            qualify(r)
+        rows += extra
+        floor = _realisation_floor(rows, float(rep.fit["before"]["overall"]))
+        best = _best_rows(r for r in rows[1:] if self.located(r) and r["hypothesis"] != REPLICATE)
+        promote = sorted((r for r in best.values() if _decisive(r, floor)),
+                         key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
+        # the full runs stay 1 + top_k: the screening's claim, then the promoted levels, then
+        # the other screened candidates
+        claim = [h for h in self.candidates if h["name"] == rep.missing_physics]
+        promote = promote[:max(0, self.top_k - len(claim))]
+        others = [h for h in self.candidates if h["name"] != rep.missing_physics]
+        candidates = claim + others[:max(0, self.top_k - len(claim) - len(promote))]
+        verdicts = {n: ("promoted to a full run" if any(p is r for p in promote) else
+                        "not promoted: " + _verdict(r, floor, False, None, None))
+                    for n, r in best.items()}
+        return _SearchTier(rows, floor,
+                           [(r["hypothesis"], dict(r["overrides"]), r["search_value"])
+                            for r in promote], candidates, verdicts)
+
+    def full_tier(self, sim: Simulator, tier: _SearchTier | None) -> _FullTier:
+        """The full runs: recalibration, candidates, promoted levels, or (without a search
+        tier) every search level, its refinement and the replicates."""
+        rep = self.rep
+        candidates = tier.candidates if tier is not None else self.candidates
+        requests: list[Request] = [
+            (RECALIBRATION.name, {**RECALIBRATION.scenario_overrides(self.recal["recalibration"]),
+                                  **self.cfc_key}, None)]
+        for h in candidates:
+            # the effect alone on the baseline scenario: the screening model's recalibration
+            # factors do not carry over to the full model's material parameters (measured on
+            # the DEM: every full run with the mapped factors scored below the baseline), while
+            # the effect parameters (depths, speeds, frequencies) have the same meaning in both
+            requests.append((h["name"], {**_confirmation_overrides(h, rep.catalogue),
+                                         **self.cfc_key}, None))
+        if tier is not None:
+            requests += tier.promoted
+        else:
+            requests += self.levels(list(self.searched)) + self.replicate_requests()
+        rows = self.run(sim, requests)
+        recal_row = rows[0]
+        # reference: the better of the baseline simulation and the recalibrated full run
+        base_row: Row = {"hypothesis": "baseline", "score": float(rep.fit["before"]["overall"]),
+                         "aligned": rep.baseline, "rss": _full_rss(rep, rep.baseline)}
+        ref_row = max([base_row, recal_row], key=lambda r: r["score"])
+        ref_k = 0 if ref_row is base_row else len(RECALIBRATION.parameters)
+        ref_bic = self.bic(ref_row["rss"], ref_k)
+
+        def qualify(r: Row) -> None:
+            if "rss" in r:
+                # a screened candidate's run carries the effect's parameters, a search level
+                # one (the level), the reference its recalibration when it is the recalibrated
+                # run
+                k = (1 if "search_value" in r else 0 if r["hypothesis"] == REPLICATE
+                     else len(rep.catalogue.get(r["hypothesis"]).parameters))
+                r["delta_bic_vs_reference"] = ref_bic - self.bic(r["rss"], k)
+
+        for r in rows[1:]:
+            qualify(r)
+        if self.searched and tier is None:
+            extra = self.refined(sim, rows)
+            for r in extra:
+                qualify(r)
+            rows += extra
+        # the realisation floor: the best replicate of the baseline among the full runs (none
+        # there, e.g. when they ran on the search simulator: the reference)
+        return _FullTier(rows, ref_row["score"], _realisation_floor(rows, ref_row["score"]))
+
+    def decide(self, full: _FullTier) -> _Decision:
+        """The screening's claim stands unless its full run is decisively worse than the
+        reference or the best replicate (in likelihood, or by ``CONFIRM_MIN_GAIN`` in score:
+        a full run that fits the recording worse by the field's objective rating does not
+        confirm anything) or another candidate's full run is decisively better than it; a
+        model-free answer (sensor check, measured impact speed) stands as it is. Among decisive
+        rivals the likelihood ranks (the score is the field's rating, its differences between
+        two good fits are not evidence); two within ``AMBIGUITY_MARGIN`` of each other are not
+        told apart."""
+        rep, floor = self.rep, full.floor
+        best_h = _best_rows(r for r in full.rows[1:]
+                            if self.located(r) and r["hypothesis"] != REPLICATE)
+        confirmed, best = None, full.rows[0]
+        screened = best_h.get(rep.missing_physics) if rep.missing_physics else None
+        if screened is not None and (self.model_free or (
+                screened["delta_bic_vs_reference"] - floor["delta_bic"] >= -ACCEPT_MARGIN
+                and screened["score"] >= floor["score"] - CONFIRM_MIN_GAIN)):
+            confirmed, best = screened["hypothesis"], screened
+        claim_stood = confirmed is not None
+        rivals = [] if self.model_free else sorted(
+            (r for r in best_h.values() if r is not screened and _decisive(r, floor)),
+            key=lambda r: -r["delta_bic_vs_reference"])
+        ambiguous = None
+        if rivals:
+            top = rivals[0]
+            if len(rivals) > 1 and (top["delta_bic_vs_reference"]
+                                    - rivals[1]["delta_bic_vs_reference"] <= AMBIGUITY_MARGIN):
+                ambiguous = [r["hypothesis"] for r in rivals[:2]]
+                rep.fit["confirmation_ambiguous"] = {
+                    r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
+                                      "score": r["score"]} for r in rivals[:2]}
+            elif screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
+                confirmed, best = top["hypothesis"], top
+        return _Decision(confirmed, best, screened, claim_stood, ambiguous, best_h)
+
+    def verdicts(self, full: _FullTier, d: _Decision) -> dict[str, str]:
+        """Why each effect run in the full model was or was not named, in one line each."""
+        rows = full.rows
+        every = _best_rows(r for r in rows[1:] if "rss" in r and r["hypothesis"] != REPLICATE)
+        out: dict[str, str] = {}
+        for name in dict.fromkeys(r["hypothesis"] for r in rows[1:]):
+            if name in (REPLICATE, RECALIBRATION.name):
+                continue
+            r = d.best_by_effect.get(name)
+            if name == d.confirmed:
+                why = "named"
+            elif r is not None and r is d.screened and d.claim_stood:
+                why = (f"the screening's claim stood (Delta BIC "
+                       f"{r['delta_bic_vs_reference']:.1f}, score {r['score']:.3f}), but "
+                       f"{d.confirmed}'s full run beats it by {CONFIRM_MIN_GAIN:g} in score and "
+                       f"the reference decisively")
+            elif r is None:
+                err = next((x.get("error") for x in rows
+                            if x["hypothesis"] == name and "error" in x), None)
+                fs = self.searched.get(name)
+                why = (f"the full model could not run it ({err})" if err and name not in every
+                       else "its best run is at the end of the span where the effect fades "
+                       f"({fs.parameter} = {every[name]['search_value']:.4g} {fs.unit}, Delta "
+                       f"BIC {every[name]['delta_bic_vs_reference']:.1f}): names nothing")
+            else:
+                why = _verdict(r, full.floor, r is d.screened, self.model_free,
+                               d.ambiguous)
+            out[name] = why
+        return out
+
+    def record(self, full: _FullTier, tier: _SearchTier | None, d: _Decision,
+               t_full: float) -> None:
+        """Write the confirmation into the report: tables, verdicts, floor, search, decision."""
+        rep, rows, searched = self.rep, full.rows, self.searched
+        rep.fit["confirmation_verdicts"] = self.verdicts(full, d)
+        if d.confirmed is not None and "search_value" in d.best:
+            _adopt_full_parameters(rep, d.best, searched[d.confirmed],
+                                   tier.rows if tier is not None else rows)
+        if self.skipped:
+            rep.fit["confirmation_skipped"] = self.skipped
+        if self.replicates:
+            f = tier.floor if tier is not None else full.floor
+            rep.fit["realisation"] = {
+                "tier": "search simulator" if tier is not None else "full simulator",
+                "runs": [{"overrides": r["overrides"],
+                          "score": None if not math.isfinite(r["score"]) else r["score"],
+                          "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
+                          **({"error": r["error"]} if "error" in r else {})}
+                         for r in (tier.rows if tier is not None else rows)
+                         if r["hypothesis"] == REPLICATE],
+                "floor_delta_bic": f["delta_bic"], "floor_score": f["score"]}
+        if searched:
+            lv = [r for r in (tier.rows[1:] if tier is not None else rows) if "search_value" in r]
+            rep.fit.setdefault("full_search", {}).update(
+                tier="search simulator" if tier is not None else "full simulator",
+                runs=len(lv) + (1 if tier is not None else 0),
+                levels=[{"hypothesis": r["hypothesis"], "value": r["search_value"],
+                         "score": None if not math.isfinite(r["score"]) else r["score"],
+                         "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
+                         "refined": bool(r.get("refined")), "located": self.located(r)}
+                        for r in lv],
+                best={n: {"value": r["search_value"], "score": r["score"],
+                          "delta_bic_vs_reference": r["delta_bic_vs_reference"]}
+                      for n, r in _best_rows(r for r in lv if "rss" in r).items()})
+            if tier is not None:
+                rep.fit["full_search"]["search_baseline_score"] = tier.rows[0]["score"]
+                rep.fit["full_search"]["verdicts"] = tier.verdicts
+                rep.simulations["search_simulations"] = len(tier.rows)
+        rep.fit["confirmation"] = [{k: (None if k == "score" and not math.isfinite(v) else v)
+                                    for k, v in r.items() if k != "aligned"} for r in rows]
+        rep.fit["confirmation_reference_score"] = full.reference
+        rep.fit["confirmed_missing_physics"] = d.confirmed
+        if d.confirmed is not None:
+            rep.fit["after_full"] = {"hypothesis": d.confirmed, "overall": d.best["score"],
+                                     "per_channel": d.best["per_channel"]}
+            rep.refitted = dict(d.best["aligned"])
+        rep.simulations["full_simulations"] = len(rows)
+        rep.simulations["full_wall_time_s"] = t_full
+        rep.missing_physics = d.confirmed
+        rep.decision += "; " + self.sentence(full, tier, d)
+
+    def sentence(self, full: _FullTier, tier: _SearchTier | None, d: _Decision) -> str:
+        """The confirmation's part of the report's decision line."""
+        rows, searched, best, confirmed = full.rows, self.searched, d.best, d.confirmed
+        n_lv = sum("search_value" in r for r in rows)
+        if tier is not None:
+            how = (f"{len(rows)} runs, {n_lv} of them the best levels of a {len(tier.rows)}-run "
+                   f"search over {len(searched)} effects on the search simulator")
+        elif searched:
+            how = f"{len(rows)} runs, {n_lv} of them a full-model search over {len(searched)} effects"
+        else:
+            how = f"{len(rows)} runs"
+        at = (f" at {searched[confirmed].parameter} = {best['search_value']:.4g} "
+              f"{searched[confirmed].unit}" if confirmed and "search_value" in best else "")
+        if self.replicates:
+            rf = self.rep.fit["realisation"]
+            how += (f"; realisation floor of {len(self.replicates)} replicate packings on the "
+                    f"{rf['tier']}: Delta BIC {rf['floor_delta_bic']:.1f}, score "
+                    f"{rf['floor_score']:.3f}")
+        return (f"full-simulation confirmation ({how}, reference score {full.reference:.3f}): "
+                + (f"{' and '.join(d.ambiguous)} both beat the reference within Delta BIC "
+                   f"{AMBIGUITY_MARGIN:g} of each other, neither named; " if d.ambiguous else "")
+                + (f"{confirmed} confirmed{at} (score {best['score']:.3f}, Delta BIC "
+                   f"{best.get('delta_bic_vs_reference', 0.0):.1f})"
+                   if confirmed and best is not rows[0] else
+                   f"{confirmed} confirmed (score {best['score']:.3f})" if confirmed
+                   else "no missing physics confirmed"))
+
+
+def _run_full(full_simulator: Simulator, requests: list[tuple[str, dict[str, Any]]]) -> list[Any]:
+    """Run the full simulator on every request (one batch when it has ``map``); a run the full
+    model cannot do (``ValueError`` / ``RuntimeError``) is returned as the exception, except the
+    recalibration's, which is raised."""
+    if hasattr(full_simulator, "map"):
+        try:
+            return list(full_simulator.map([ov for _, ov in requests]))  # type: ignore[attr-defined]
+        except (RuntimeError, ValueError):
+            # a run of the batch failed (e.g. a hypothesis the full model cannot represent):
+            # run them one by one so that the others can still be scored
+            pass
+    outs: list[Any] = []
+    for name, ov in requests:
+        try:
+            outs.append(full_simulator(ov))
+        except (ValueError, RuntimeError) as e:  # the full model cannot run this hypothesis
+            if name == RECALIBRATION.name:
+                raise
+            outs.append(e)
+    return outs
+
+
+def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
+             model_free: str | None, ambiguous: list[str] | None) -> str:
+    """One line on why the effect whose best full run is ``r`` was not named (the rules of
+    ``screen_then_confirm``, first failed first); ``is_claim``: ``r`` is the screening's claim
+    and did not stand (a claim that stood and was replaced is worded by the caller);
+    ``model_free`` names a model-free answer that stands (then nothing else is named)."""
+    db, sc = float(r["delta_bic_vs_reference"]), float(r["score"])
+    if model_free:
+        return f"a model-free answer ({model_free}) names another effect"
+    if ambiguous and r["hypothesis"] in ambiguous:
+        return (f"decisive (Delta BIC {db:.1f}) but within Delta BIC {AMBIGUITY_MARGIN:g} of "
+                f"{next(a for a in ambiguous if a != r['hypothesis'])}: not told apart")
+    if is_claim:
+        return (f"the screening's claim, but its full run is decisively worse than the reference "
+                f"or the best replicate (Delta BIC {db:.1f}, score {sc:.3f})")
+    if db <= ACCEPT_MARGIN:
+        return f"Delta BIC {db:.1f} over the reference, not above {ACCEPT_MARGIN:g}"
+    if db - floor["delta_bic"] <= REALISATION_MARGIN:
+        return (f"fits no better than a replicate packing of the baseline (Delta BIC {db:.1f} "
+                f"against the best replicate's {floor['delta_bic']:.1f})")
+    if sc - floor["score"] < CONFIRM_MIN_GAIN:
+        return (f"Delta BIC {db:.1f}, but its score {sc:.3f} is not {CONFIRM_MIN_GAIN:g} above "
+                f"{floor['score']:.3f} (reference and replicates)")
+    return (f"decisive (Delta BIC {db:.1f}, score {sc:.3f}) but another effect ranks higher or "
+            f"the screening's claim stands")
+
+
+def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
+    """A scored run beats the reference (Delta BIC > ``ACCEPT_MARGIN``) and the realisation
+    ``floor`` (Delta BIC above the best replicate's by ``REALISATION_MARGIN``, score by
+    ``CONFIRM_MIN_GAIN`` above the best of reference and replicates): the rule for naming a
+    full run and for promoting a search-tier level to one."""
+    db = r["delta_bic_vs_reference"]
+    return (db > ACCEPT_MARGIN and db - floor["delta_bic"] > REALISATION_MARGIN
+            and r["score"] - floor["score"] >= CONFIRM_MIN_GAIN)
+
+
+def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float) -> dict[str, float]:
+    """The best Delta BIC (at least 0: the reference) and the best score (at least the
+    reference's) of the scored replicate runs among ``rows``."""
+    reps = [r for r in rows if r["hypothesis"] == REPLICATE and "delta_bic_vs_reference" in r
+            and math.isfinite(r["score"])]
+    return {"delta_bic": max([0.0] + [float(r["delta_bic_vs_reference"]) for r in reps]),
+            "score": max([float(reference_score)] + [float(r["score"]) for r in reps])}
+
+
+def _best_rows(rows: Iterable[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """The run with the highest Delta BIC of each hypothesis among scored ``rows``."""
+    best: dict[str, dict[str, Any]] = {}
+    for r in rows:
+        if "delta_bic_vs_reference" in r and (
+                r["hypothesis"] not in best
+                or r["delta_bic_vs_reference"] > best[r["hypothesis"]]["delta_bic_vs_reference"]):
+            best[r["hypothesis"]] = r
+    return best
+
+
+def _level_rows(rows: list[dict[str, Any]], name: str) -> list[dict[str, Any]]:
+    """The scored search-level runs of hypothesis ``name``, by ascending value."""
+    return sorted((r for r in rows if r["hypothesis"] == name and "search_value" in r
+                   and "delta_bic_vs_reference" in r), key=lambda r: r["search_value"])
+
+
+def _parabola(lv: list[dict[str, Any]], i: int, fs: catalogue.FullSearch
+              ) -> tuple[np.ndarray, float, float] | None:
+    """The parabola ``a2 u^2 + a1 u + a0`` of Delta BIC through level ``lv[i]`` and its two
+    neighbours in the search coordinate u: ``(u of the three, a2, a1)``; None at an edge."""
+    if i <= 0 or i >= len(lv) - 1:
+        return None
+    u = np.array([fs.coord(lv[j]["search_value"]) for j in (i - 1, i, i + 1)])
+    a2, a1, _ = np.polyfit(u, [lv[j]["delta_bic_vs_reference"] for j in (i - 1, i, i + 1)], 2)
+    return u, float(a2), float(a1)
+
+
+def _search_vertex(best: dict[str, Any], rows: list[dict[str, Any]],
+                   fs: catalogue.FullSearch) -> dict[str, float] | None:
+    """The vertex of the parabola through the best search level and its two neighbours
+    (Delta BIC against the search coordinate), when the best level is interior and the
+    parabola opens downwards: ``{"value"}``, else None."""
+    lv = _level_rows(rows, best["hypothesis"])
+    i = next((j for j, r in enumerate(lv) if r is best), None)
+    par = _parabola(lv, i, fs) if i is not None else None
+    if par is None or not par[1] < 0.0:
+        return None
+    u, a2, a1 = par
+    return {"value": fs.value(float(np.clip(-a1 / (2.0 * a2), u[0], u[2])))}
+
+
+def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.FullSearch,
+                           rows: list[dict[str, Any]]) -> None:
+    """Record the full model's value of a named searched effect in its hypothesis entry
+    (``full_model``) and, where the screening parameter means the same, in ``parameters``
+    (the screening's kept in ``screening_parameters``). Uncertainty: from the curvature of
+    Delta BIC over the levels around the best run (1 / sqrt(information) in the search
+    coordinate), else half the distance to the nearest level."""
+    name, x = best["hypothesis"], float(best["search_value"])
+    lv = _level_rows(rows, name)
+    levels = [r for r in lv if not r.get("refined")]
+    i = min(range(len(levels)), key=lambda j: abs(fs.coord(levels[j]["search_value"]) - fs.coord(x)))
+    par = _parabola(levels, i, fs)
+    sd = None
+    if par is not None and par[1] < 0.0:
+        su = 1.0 / math.sqrt(-par[1] / 2.0)
+        sd = su * x if fs.scale == "log" else su
+    if sd is None:
+        gaps = [abs(fs.coord(r["search_value"]) - fs.coord(x)) for r in levels
+                if r["search_value"] != x]
+        su = 0.5 * min(gaps) if gaps else float("nan")
+        sd = su * x if fs.scale == "log" else su
+    h = next((h for h in rep.hypotheses if h["name"] == name), None)
+    if h is None:
+        return
+    h["full_model"] = {"parameters": {fs.parameter: x}, "uncertainty": {fs.parameter: sd},
+                       "unit": {fs.parameter: fs.unit}, "overrides": best["overrides"],
+                       "score": best["score"],
+                       "delta_bic_vs_reference": best["delta_bic_vs_reference"],
+                       "runs": len(lv)}
+    # the scenario fix is the full model's own (the screening's values were mapped across)
+    h["scenario_overrides"] = dict(best["overrides"])
+    if fs.parameter in h.get("parameters", {}):
+        h["screening_parameters"] = dict(h["parameters"])
+        h["parameters"] = {**h["parameters"], fs.parameter: x}
+        if isinstance(h.get("uncertainty"), dict):
+            h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
+    rep.fit.setdefault("full_search", {})["named"] = {"hypothesis": name, fs.parameter: x,
+                                                      "uncertainty": sd, "unit": fs.unit}
+
+
+def _confirmation_overrides(h: dict[str, Any],
+                            cat: catalogue.Catalogue = catalogue.DROP) -> dict[str, Any]:
+    """Scenario overrides of a candidate's full run: its screened parameters, except where
+    the screening left the effect switched off (a parameter at its ``off`` value, i.e. the
+    screening model could not see the effect): there the catalogue's nominal value is used."""
+    if h.get("variant") == FILTER_CLASS_VARIANT:
+        return {"instrumentation.cfc": float(h["parameters"]["filter_class"])}
+    hyp = cat.get(h["name"])
+    vals = dict(h["parameters"])
+    for p in hyp.parameters:
+        if p.name in vals and _at_off(p, vals[p.name]):
+            vals[p.name] = p.nominal
+    return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
+
+
+def _full_rss(rep: Report, aligned: Mapping[str, Signal]) -> float:
+    """Weighted residual sum of squares of aligned channels against the report's recording,
+    on the residual samples of the diagnosis (weights: sensor noise and model-error floor)."""
+    rss = 0.0
+    t0 = float(rep.fit["score_window_s"][0])
+    me = rep.fit.get("model_error", {})
+    for ch in rep.channels:
+        rec = rep.recording[ch]
+        sm = me.get(ch, {}).get("sigma", 0.0)
+        w = 1.0 / math.sqrt(rep.noise[ch].sigma ** 2 + sm * sm)
+        idx = np.flatnonzero(rec.t >= t0)
+        stride = max(1, int(round(idx.size / max(1, rep.fit["n_samples"] // len(rep.channels)))))
+        idx = idx[::stride]
+        rss += float(np.sum(((aligned[ch].data[idx] - rec.data[idx]) * w) ** 2))
+    return rss
