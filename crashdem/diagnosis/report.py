@@ -152,7 +152,10 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                   f"on the {real.get('tier')}): an effect is named only when its run fits the "
                   f"recording better than every replicate (Delta BIC above "
                   f"{real['floor_delta_bic']:.1f}, score {CONFIRM_MIN_GAIN:g} above "
-                  f"{_fmt(real['floor_score'])}).",
+                  f"{_fmt(real['floor_score'])})"
+                  + (f"; their Delta BIC scatters by {real['scatter_delta_bic']:.1f} (sample "
+                     f"standard deviation): two effects closer than that are not told apart"
+                     if real.get("scatter_delta_bic") is not None else "") + ".",
                   "", "| replicate | score | Delta BIC vs reference |", "|---|---|---|"]
         for r in real["runs"]:
             ov = ", ".join(f"{k}={v}" for k, v in (r.get("overrides") or {}).items())

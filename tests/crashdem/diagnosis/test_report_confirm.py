@@ -193,6 +193,7 @@ def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
     md = write_report(rep, tmp_path, plots=False)["md"]
     text = Path(md).read_text()
     assert "Realisation floor (2 replicate packings" in text
+    assert f"scatters by {rf['scatter_delta_bic']:.1f} (sample standard deviation)" in text
     assert "| scenario.seed=3 |" in text
     assert f"| cohesion | {why['cohesion']} |" in text
 
@@ -597,3 +598,33 @@ def test_library_screening_model_follows_the_given_impact_speed():
     assert _drop_rom(None, None) == RomParams()
     with pytest.raises(ValueError, match=r"impact_speed=9\.9.*rom_base\.v0 is 16\.4"):
         diagnose(base, rec, impact_speed=v, rom_base=RomParams())
+
+
+@pytest.mark.parametrize("replicate_bics, named", [((-10.0, 5.0), None), ((0.0, 1.0), "a")])
+def test_two_effects_closer_than_the_realisation_scatter_are_not_told_apart(replicate_bics,
+                                                                            named):
+    """Two decisive effects 3 apart in Delta BIC (30 and 27): with replicates whose Delta BIC
+    scatters by 10.6 (sample standard deviation of -10 and 5) a realisation moves each run by
+    more than the gap, so neither is named (``fit.confirmation_ambiguous``); with replicates
+    that scatter by 0.7 the margin is ``AMBIGUITY_MARGIN`` (2) and the better one is named.
+    Oracle: the rule written out (margin = max(2, scatter))."""
+    from crashdem.diagnosis import AMBIGUITY_MARGIN
+    from crashdem.diagnosis.confirm import (REPLICATE, _ambiguity_margin, _Confirmation,
+                                            _FullTier, _realisation_floor)
+
+    def run(name, db, score):
+        return {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
+                "delta_bic_vs_reference": db}
+
+    rows = [run("recalibration", 0.0, 0.70), run("a", 30.0, 0.90), run("b", 27.0, 0.90)] + [
+        run(REPLICATE, db, 0.72) for db in replicate_bics]
+    floor = _realisation_floor(rows, 0.70)
+    assert floor["scatter"] == pytest.approx(float(np.std(replicate_bics, ddof=1)))
+    assert _ambiguity_margin(floor) == max(AMBIGUITY_MARGIN, floor["scatter"])
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+    c.searched, c.model_free = {}, None
+    d = c.decide(_FullTier(rows, 0.70, floor))
+    assert d.confirmed == named
+    assert (d.ambiguous == ["a", "b"]) == (named is None)
+    assert ("confirmation_ambiguous" in c.rep.fit) == (named is None)
