@@ -3,6 +3,7 @@ Yade 2023.02a, diagnosed against crashdem's own DEM baseline.
 
     python validation/diagnose_yade.py                  # 6 effects x seeds 11, 12 + nulls 21, 22
     python validation/diagnose_yade.py --effects cohesion --seeds 11
+    python validation/diagnose_yade.py --scenario validation/scenarios/drop_s2_h5p00.toml
 
 Each case: ``validation.diagnosis_yade.cases.yade_case`` (Yade deposition, contact laws, time
 step and effect implementation; lab acquisition), then ``crashdem.diagnosis.screen_then_confirm``
@@ -98,7 +99,15 @@ def main(argv=None) -> int:
                     help="diagnose Yade's raw output (no lab acquisition: no noise, filter or "
                          "pre-trigger) instead of lab channels")
     ap.add_argument("--top-k", type=int, default=TOP_K)
+    ap.add_argument("--scenario", default=None,
+                    help="drop-test scenario of the Yade truth and crashdem's baseline (default: "
+                         "validation/scenarios/drop_s2_h13p70.toml; e.g. drop_s2_h5p00.toml for "
+                         "the 5 m drop)")
     args = ap.parse_args(argv)
+    if args.scenario is not None:
+        from crashdem.diagnosis.generator_dem import use_scenario
+
+        use_scenario(args.scenario)
     if not yade_available():
         print("yade is not installed (apt-get install yade): nothing to do")
         print(json.dumps({"cases": [], "skipped": "yade not installed"}))

@@ -52,12 +52,27 @@ from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
 from crashdem.signal import Signal
 
 __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
-           "replicates",
+           "replicates", "use_scenario",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
            "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS"]
 
 #: the drop-test scenario of the truth and baseline
 SCENARIO = Path(__file__).resolve().parents[2] / "validation" / "scenarios" / "drop_s2_h13p70.toml"
+
+
+def use_scenario(path: str | Path) -> Path:
+    """Make ``path`` (a ``drop_test`` scenario file, e.g. another drop height of the campaign)
+    the scenario of the truth runs, the baseline and ``DemFullSimulator`` (and of the Yade
+    cases, ``validation/diagnosis_yade``); returns the previous one. Runs are cached per
+    scenario file (its bytes are part of the key)."""
+    global SCENARIO
+    new = Path(path).resolve()
+    if not new.is_file():
+        raise ValueError(f"scenario={str(path)!r}: no such file")
+    old, SCENARIO = SCENARIO, new
+    return old
+
+
 #: small resolution (validation/campaign/studies.py RESOLUTIONS["small"] + COMMON); the layering
 #: of the reference file is switched off: the baseline is a homogeneous bed
 BASE_OVERRIDES: dict[str, Any] = {

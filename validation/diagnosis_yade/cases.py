@@ -43,7 +43,8 @@ from typing import Any
 import numpy as np
 
 from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
-from crashdem.diagnosis.generator_dem import BASE_OVERRIDES, SCENARIO, cache_dir, dem_baseline
+from crashdem.diagnosis import generator_dem
+from crashdem.diagnosis.generator_dem import BASE_OVERRIDES, cache_dir, dem_baseline
 from crashdem.signal import Signal
 
 SCRIPT = Path(__file__).resolve().parent / "yade_truth.py"
@@ -93,7 +94,7 @@ def _draw(lo: float, hi: float, scale: str, rng: np.random.Generator) -> float:
 def _scenario():
     from crashdem import scenario as sc
 
-    return sc.load(SCENARIO, dict(BASE_OVERRIDES))
+    return sc.load(generator_dem.SCENARIO, dict(BASE_OVERRIDES))
 
 
 def _fingerprint() -> str:

@@ -628,3 +628,28 @@ def test_two_effects_closer_than_the_realisation_scatter_are_not_told_apart(repl
     assert d.confirmed == named
     assert (d.ambiguous == ["a", "b"]) == (named is None)
     assert ("confirmation_ambiguous" in c.rep.fit) == (named is None)
+
+
+def test_an_effect_stands_by_its_best_decisive_run():
+    """Effect b's most likely run (Delta BIC 29) fails the score margin, another of its runs
+    (26, score 0.90) passes every rule: b stands by that run, so it is a rival of a (30) and,
+    3 apart against a realisation scatter of 10.6, neither is named. Before, b stood by its
+    failing run and a was named (measured: a Yade 18.45 m floor recording named cohesion)."""
+    from crashdem.diagnosis.confirm import REPLICATE, _Confirmation, _FullTier, _realisation_floor
+
+    def run(name, db, score):
+        return {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
+                "delta_bic_vs_reference": db}
+
+    b_likely, b_decisive = run("b", 29.0, 0.70), run("b", 26.0, 0.90)
+    rows = [run("recalibration", 0.0, 0.70), run("a", 30.0, 0.90), b_likely, b_decisive,
+            run(REPLICATE, -10.0, 0.72), run(REPLICATE, 5.0, 0.72)]
+    floor = _realisation_floor(rows, 0.70)
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+    c.searched, c.model_free = {}, None
+    assert c.standing(rows[1:], floor)["b"] is b_decisive
+    # without a decisive run an effect stands by its most likely one
+    assert c.standing([rows[1], b_likely], floor)["b"] is b_likely
+    d = c.decide(_FullTier(rows, 0.70, floor))
+    assert d.confirmed is None and d.ambiguous == ["a", "b"]
