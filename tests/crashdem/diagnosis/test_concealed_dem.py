@@ -347,3 +347,25 @@ def test_cli_filter_class_from_csv(tmp_path):
     assert fc["channels"]["accel_z"]["refilter"] == "from the raw channel"
     h = next(h for h in rep["hypotheses"] if h["name"] == "sensor_dynamics")
     assert h["scenario_overrides"] == {"instrumentation.cfc": case.values["filter_class"]}
+
+
+def test_use_scenario_switches_the_drop_height_and_the_cache_key():
+    """``generator_dem.use_scenario`` makes another drop height the truth's, baseline's and full
+    simulator's scenario (the Yade validation's ``--scenario``): the impact speed follows the
+    file (sqrt(2 g h) at 5 m), runs are keyed by it, the previous one is returned and restored;
+    a missing file is refused with the field named."""
+    import math
+
+    from crashdem.diagnosis import generator_dem as gd
+
+    key13 = gd._key({"x": 1})
+    old = gd.use_scenario(gd.SCENARIO.parent / "drop_s2_h5p00.toml")
+    try:
+        assert gd.impact_speed() == pytest.approx(math.sqrt(2.0 * 9.81 * 5.0))
+        assert gd._key({"x": 1}) != key13
+        assert DemFullSimulator().scenario.impact_velocity == pytest.approx(gd.impact_speed())
+    finally:
+        gd.use_scenario(old)
+    assert gd._key({"x": 1}) == key13
+    with pytest.raises(ValueError, match="scenario="):
+        gd.use_scenario(gd.SCENARIO.parent / "no_such_drop.toml")
