@@ -569,6 +569,137 @@ def _model_error(disc: Mapping[str, Signal], shift: float, t0: float, t1: float,
     return out
 
 
+class _Scaled:
+    """Compose the calibration scales with the fitted recalibration scales; add the
+    baseline anchor (discrepancy) when there is one."""
+
+    def __init__(self, inner, scales, disc, depth_cal=None):
+        self.inner, self.scales, self.disc, self.calls = inner, scales, disc, 0
+        self.depth_cal = depth_cal  # calibrated run's tip depth (depth-indexed anchor)
+
+    def __call__(self, values):
+        self.calls += 1
+        v = dict(values)
+        for k, s in self.scales.items():
+            v[k] = v.get(k, 1.0) * s
+        out = self.inner(v)
+        if not self.disc:
+            return out
+        out = dict(out)
+        tau = None
+        zc = self.depth_cal
+        if zc is not None and PENETRATION in out and out[PENETRATION].t.shape == zc.t.shape \
+                and np.array_equal(out[PENETRATION].t, zc.t):
+            tau = _depth_index(zc.t, out[PENETRATION].data, zc.data)
+        for ch, d in self.disc.items():
+            o = out[ch]
+            if tau is not None and o.t.shape == zc.t.shape and np.array_equal(o.t, zc.t):
+                add = np.interp(tau, d.t, d.data)
+            else:
+                add = d.data if (o.t.shape == d.t.shape and np.array_equal(o.t, d.t)) else \
+                    np.interp(o.t, d.t, d.data)
+            out[ch] = Signal(o.name, o.t, o.data + add, o.unit, o.cfc, o.meta)
+        return out
+
+
+def _impact_speed_check(rec: Mapping[str, Signal], noise: Mapping[str, NoiseEstimate],
+                        v_nom: float) -> dict[str, Any] | None:
+    """The recorded impact speed (``measured_impact_speed``, on the channels as recorded: a
+    channel filtered by the diagnosis would smear the contact into the free fall) and its
+    offset from the baseline's ``v_nom``; ``used`` is False (with the reason) when it is not
+    within 50 % of it (another sign convention or unit, or another test). None when the
+    recording has no free-fall segment."""
+    has_acc = ACCEL in rec and ACCEL in noise
+    speed = measured_impact_speed(rec[ACCEL] if has_acc else None, rec[VELOCITY],
+                                  noise[VELOCITY], noise[ACCEL].sigma if has_acc else 0.0)
+    if speed is None:
+        return None
+    speed.update(nominal=v_nom, offset=speed["impact_speed"] - v_nom)
+    if not abs(speed["offset"]) < 0.5 * v_nom:
+        return {**speed, "used": False,
+                "reason": f"recorded impact speed {speed['impact_speed']:.3g} m/s is not "
+                          f"within 50 % of the baseline's {v_nom:.3g} m/s"}
+    speed["used"] = True
+    return speed
+
+
+def _hypothesis_entry(r: FitResult, h: Hypothesis, recal: FitResult, score_before: float,
+                      windows: list[MismatchWindow], base_rms: float, rec: Mapping[str, Signal],
+                      noise: Mapping[str, NoiseEstimate], channels: Sequence[str],
+                      check: Mapping[str, Any] | None) -> dict[str, Any]:
+    """One ``hypotheses`` entry of report.json for the fit ``r`` of ``h`` (``check``: the
+    model-free sensor check when it found this sensor)."""
+    after_r: list[MismatchWindow] = []
+    for ch in channels:
+        after_r += locate_mismatch(rec[ch], r.aligned[ch], noise[ch], shift=0.0)
+    own = [p.name for p in h.parameters]
+    if r.variant == FILTER_CLASS_VARIANT:
+        own = ["filter_class"]
+    return {
+        "name": r.hypothesis,
+        "parameters": {k: r.parameters[k] for k in own} if own else {},
+        "uncertainty": {k: r.uncertainty[k] for k in own} if own else {},
+        "units": {k: r.units[k] for k in own},
+        "recalibration": {p.name: r.parameters[p.name] for p in RECALIBRATION.parameters},
+        "recalibration_uncertainty": {p.name: r.uncertainty[p.name]
+                                      for p in RECALIBRATION.parameters},
+        "variant": r.variant,
+        "scenario_overrides": ({"instrumentation.cfc": r.parameters["filter_class"]}
+                               if r.variant == FILTER_CLASS_VARIANT else
+                               h.scenario_overrides(r.parameters, r.variant)),
+        "effects": r.hypothesis.split("+") if r.hypothesis != RECALIBRATION.name else [],
+        "score_before": score_before,
+        "score_after": r.scores["overall"],
+        "residual_rms_sigma": r.rms_sigma,
+        "bic": r.bic,
+        "delta_bic_vs_recalibration": recal.bic - r.bic,
+        "complexity_penalty": r.complexity_penalty,
+        "n_parameters": r.k,
+        "parameters_at_bounds": r.at_bounds,
+        "evidence": _evidence(h, r, windows, after_r, base_rms) + (
+            f" The accelerometer disagrees with the recorded velocity's derivative by "
+            f"{check['rms_sigma_ideal']:.1f} sigma RMS; a {check['form']} sensor explains it "
+            f"to {check['rms_sigma_fitted']:.2f} sigma (model-free check)."
+            if check is not None else ""),
+        "time_shift_s": r.shift_s,
+        "n_evaluations": r.n_evals,
+    }
+
+
+def _second_stage(problem: FitProblem, cat: catalogue.Catalogue, fits: dict[str, FitResult],
+                  missing: str, chosen: FitResult
+                  ) -> tuple[list[dict[str, Any]], FitResult | None]:
+    """The accepted effect ``missing`` combined with each other effect (greedy forward
+    selection): one row per pair, and the best pair that is a candidate (added to ``fits``).
+    A pair is a candidate only when its added effect is switched on (not at its "off" values:
+    that is the single effect with a nuisance tweak, e.g. a wall 1 cm nearer for a 1 cm larger
+    nose) and explains most of what the first effect leaves (residual RMS at most
+    ``SECOND_EFFECT_RMS_RATIO`` of it): a model-form difference buys smaller gains from any
+    flexible extra term."""
+    rows: list[dict[str, Any]] = []
+    combos = []
+    for name in cat.names:
+        if name == missing:
+            continue
+        h2 = cat.combine(missing, name)
+        r2 = fit_variants(problem, h2, start=chosen.parameters,
+                          grid_over=[p.name for p in cat.get(name).parameters],
+                          n_starts=3, n_full=3)
+        ratio = r2.rms_sigma / chosen.rms_sigma if chosen.rms_sigma > 0 else 1.0
+        row = {"name": h2.name, "delta_bic": chosen.bic - r2.bic, "rms_ratio": ratio}
+        if _left_off(cat.get(name), r2.parameters):
+            row["rejected"] = f"{name} stays at its off values"
+        elif ratio > SECOND_EFFECT_RMS_RATIO:
+            row["rejected"] = (f"explains too little of the residual (RMS ratio {ratio:.2f} > "
+                               f"{SECOND_EFFECT_RMS_RATIO:g})")
+        rows.append(row)
+        if "rejected" in row:
+            continue
+        fits[h2.name] = r2
+        combos.append(r2)
+    return rows, (min(combos, key=lambda r: r.bic) if combos else None)
+
+
 #: relative difference of the given ``impact_speed`` and the screening model's ``rom_base.v0``
 #: above which they describe two different tests (refused)
 ROM_SPEED_TOLERANCE = 0.02
@@ -728,38 +859,6 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             model_err = _model_error(disc, cal_shift, tb0, tb1, noise)
         rom_calls0 = getattr(simulator, "calls", 0)
 
-    class _Scaled:
-        """Compose the calibration scales with the fitted recalibration scales; add the
-        baseline anchor (discrepancy) when there is one."""
-
-        def __init__(self, inner, scales, disc, depth_cal=None):
-            self.inner, self.scales, self.disc, self.calls = inner, scales, disc, 0
-            self.depth_cal = depth_cal  # calibrated run's tip depth (depth-indexed anchor)
-
-        def __call__(self, values):
-            self.calls += 1
-            v = dict(values)
-            for k, s in self.scales.items():
-                v[k] = v.get(k, 1.0) * s
-            out = self.inner(v)
-            if not self.disc:
-                return out
-            out = dict(out)
-            tau = None
-            zc = self.depth_cal
-            if zc is not None and PENETRATION in out and out[PENETRATION].t.shape == zc.t.shape \
-                    and np.array_equal(out[PENETRATION].t, zc.t):
-                tau = _depth_index(zc.t, out[PENETRATION].data, zc.data)
-            for ch, d in self.disc.items():
-                o = out[ch]
-                if tau is not None and o.t.shape == zc.t.shape and np.array_equal(o.t, zc.t):
-                    add = np.interp(tau, d.t, d.data)
-                else:
-                    add = d.data if (o.t.shape == d.t.shape and np.array_equal(o.t, d.t)) else \
-                        np.interp(o.t, d.t, d.data)
-                out[ch] = Signal(o.name, o.t, o.data + add, o.unit, o.cfc, o.meta)
-            return out
-
     sim = _Scaled(simulator, base_values, disc, depth_cal)
     problem = FitProblem(rec, noise, channels, sim, {}, shift0, t0, model_error=model_err)
     base_scores = problem.scores(base_aligned)
@@ -775,23 +874,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
                                      quiet=noise[ACCEL].window if noise[ACCEL].window else None,
                                      accept_margin=accept_margin)
     sensor_found = bool(check.get("detected")) and "sensor_dynamics" in names
-    speed: dict[str, Any] | None = None
-    if v_nom is not None and VELOCITY in channels:
-        # on the channels as recorded (a channel filtered here would smear the contact into
-        # the free fall)
-        has_acc = ACCEL in rec_given and ACCEL in noise_given
-        speed = measured_impact_speed(rec_given[ACCEL] if has_acc else None,
-                                      rec_given[VELOCITY], noise_given[VELOCITY],
-                                      noise_given[ACCEL].sigma if has_acc else 0.0)
-        if speed is not None:
-            speed.update(nominal=float(v_nom), offset=speed["impact_speed"] - float(v_nom))
-            if not abs(speed["offset"]) < 0.5 * float(v_nom):
-                # another sign convention or unit, or another test: not an offset of this one
-                speed = {**speed, "used": False,
-                         "reason": f"recorded impact speed {speed['impact_speed']:.3g} m/s is not "
-                                   f"within 50 % of the baseline's {float(v_nom):.3g} m/s"}
-            else:
-                speed["used"] = True
+    speed = (_impact_speed_check(rec_given, noise_given, float(v_nom))
+             if v_nom is not None and VELOCITY in channels else None)
     fits: dict[str, FitResult] = {}
     recal = fit_hypothesis(problem, RECALIBRATION, grid_points=1, n_starts=1)
     fits[RECALIBRATION.name] = recal
@@ -874,35 +958,11 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         missing, best_name, chosen = None, RECALIBRATION.name, recal
 
     # second stage: a large unexplained residual after the accepted effect -> try it combined
-    # with each other effect (greedy forward selection, same nested-BIC rule). A pair is a
-    # candidate only when its added effect is switched on (not at its "off" values: that is the
-    # single effect with a nuisance tweak, e.g. a wall 1 cm nearer for a 1 cm larger nose) and
-    # explains most of what the first effect leaves (residual RMS at most SECOND_EFFECT_RMS_RATIO
-    # of it): a model-form difference buys smaller gains from any flexible extra term
+    # with each other effect (``_second_stage``), same nested-BIC rule
     second_stage: list[dict[str, Any]] = []
     if missing is not None and chosen is not None and chosen.rms_sigma > SECOND_STAGE_RMS and \
             hypotheses is None:
-        combos = []
-        for name in cat.names:
-            if name == missing:
-                continue
-            h2 = cat.combine(missing, name)
-            r2 = fit_variants(problem, h2, start=chosen.parameters,
-                              grid_over=[p.name for p in cat.get(name).parameters],
-                              n_starts=3, n_full=3)
-            ratio = r2.rms_sigma / chosen.rms_sigma if chosen.rms_sigma > 0 else 1.0
-            row = {"name": h2.name, "delta_bic": chosen.bic - r2.bic, "rms_ratio": ratio}
-            if _left_off(cat.get(name), r2.parameters):
-                row["rejected"] = f"{name} stays at its off values"
-            elif ratio > SECOND_EFFECT_RMS_RATIO:
-                row["rejected"] = (f"explains too little of the residual (RMS ratio {ratio:.2f} > "
-                                   f"{SECOND_EFFECT_RMS_RATIO:g})")
-            second_stage.append(row)
-            if "rejected" in row:
-                continue
-            fits[h2.name] = r2
-            combos.append(r2)
-        best2 = min(combos, key=lambda r: r.bic) if combos else None
+        second_stage, best2 = _second_stage(problem, cat, fits, missing, chosen)
         if best2 is not None and chosen.bic - best2.bic > accept_margin:
             decision += (f"; the residual left ({chosen.rms_sigma:.1f} sigma RMS) is explained "
                          f"further by {best2.hypothesis} (Delta BIC = {chosen.bic - best2.bic:.1f})")
@@ -913,44 +973,11 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     if chosen is not None:
         for ch in channels:
             after += locate_mismatch(rec[ch], chosen.aligned[ch], noise[ch], shift=0.0)
-    hyp_out = []
-    for r in ranked:
-        h = cat.get(r.hypothesis)
-        after_r = []
-        for ch in channels:
-            after_r += locate_mismatch(rec[ch], r.aligned[ch], noise[ch], shift=0.0)
-        own = [p.name for p in h.parameters]
-        if r.variant == FILTER_CLASS_VARIANT:
-            own = ["filter_class"]
-        hyp_out.append({
-            "name": r.hypothesis,
-            "parameters": {k: r.parameters[k] for k in own} if own else {},
-            "uncertainty": {k: r.uncertainty[k] for k in own} if own else {},
-            "units": {k: r.units[k] for k in own},
-            "recalibration": {p.name: r.parameters[p.name] for p in RECALIBRATION.parameters},
-            "recalibration_uncertainty": {p.name: r.uncertainty[p.name]
-                                          for p in RECALIBRATION.parameters},
-            "variant": r.variant,
-            "scenario_overrides": ({"instrumentation.cfc": r.parameters["filter_class"]}
-                                   if r.variant == FILTER_CLASS_VARIANT else
-                                   h.scenario_overrides(r.parameters, r.variant)),
-            "effects": r.hypothesis.split("+") if r.hypothesis != RECALIBRATION.name else [],
-            "score_before": base_scores["overall"],
-            "score_after": r.scores["overall"],
-            "residual_rms_sigma": r.rms_sigma,
-            "bic": r.bic,
-            "delta_bic_vs_recalibration": recal.bic - r.bic,
-            "complexity_penalty": r.complexity_penalty,
-            "n_parameters": r.k,
-            "parameters_at_bounds": r.at_bounds,
-            "evidence": _evidence(h, r, windows, after_r, base_rms) + (
-                f" The accelerometer disagrees with the recorded velocity's derivative by "
-                f"{check['rms_sigma_ideal']:.1f} sigma RMS; a {check['form']} sensor explains it "
-                f"to {check['rms_sigma_fitted']:.2f} sigma (model-free check)."
-                if (sensor_found and r.hypothesis == "sensor_dynamics") else ""),
-            "time_shift_s": r.shift_s,
-            "n_evaluations": r.n_evals,
-        })
+    hyp_out = [_hypothesis_entry(r, cat.get(r.hypothesis), recal, base_scores["overall"], windows,
+                                 base_rms, rec, noise, channels,
+                                 check if sensor_found and r.hypothesis == "sensor_dynamics"
+                                 else None)
+               for r in ranked]
     fit_out = {
         "metric": metric_name(),
         "before": base_scores,
