@@ -150,24 +150,19 @@ def _estimate_noise(sig: Signal, quiet: tuple[float, float] | None = None) -> No
         s = _mad_sigma(_detrended(t[m], x[m]))
         return NoiseEstimate(s, "quiet window (given), MAD", (float(t[m][0]), float(t[m][-1])), sig.unit)
     # leading segment: start with the first 5 % (or pre-zero data) and extend until the onset
-    n0 = max(MIN_QUIET_SAMPLES, int(0.05 * t.size))
-    if np.any(t < 0.0):
-        n0 = max(n0, int(np.searchsorted(t, 0.0)) - 2)
-    n0 = min(n0, t.size)
-    seg = _detrended(t[:n0], x[:n0])
-    s0 = _mad_sigma(seg)
-    rng = float(np.ptp(x)) if x.size else 0.0
-    if n0 >= MIN_QUIET_SAMPLES and s0 > 0 and s0 < 0.05 * rng:
-        c = np.polyfit(t[:n0] - t[0], x[:n0], 1)
-        dev = np.abs(x - np.polyval(c, t - t[0]))
-        thr = max(K_ONSET * s0, ONSET_FRACTION * rng)
-        above = np.flatnonzero(dev > thr)
-        n1 = int(above[0]) if above.size else t.size
-        # stay clear of the onset: a zero-phase filter spreads the event backwards in time
-        guard = QUIET_GUARD if sig.cfc is None else max(QUIET_GUARD, 3.0 / (2.0 * _dsp.noise_bandwidth(sig.fs, sig.cfc)))
-        n1 = max(MIN_QUIET_SAMPLES, n1 - max(3, int(guard * sig.fs)))
-        # skip the start-up of the filter at the record's beginning when there is room
-        n_a = int(guard * sig.fs) if n1 - int(guard * sig.fs) >= MIN_QUIET_SAMPLES else 0
+    guard = QUIET_GUARD if sig.cfc is None else filter_startup(sig)
+    n_g = int(guard * sig.fs)
+    est = _leading_segment(sig, 0, guard)
+    if sig.cfc is not None and est is not None and est[1] <= n_g \
+            and t.size - n_g >= 2 * MIN_QUIET_SAMPLES:
+        # the segment ended inside the filter's start-up: its transient, not the event, when
+        # the same search from the end of the start-up finds a quiet segment longer than the
+        # guard (a record that begins near the contact has none)
+        late = _leading_segment(sig, n_g, guard)
+        if late is not None and late[1] - n_g >= n_g + MIN_QUIET_SAMPLES:
+            est = late
+    if est is not None:
+        n_a, n1 = est[0], est[2]
         seg = _detrended(t[n_a:n1], x[n_a:n1])
         return NoiseEstimate(_mad_sigma(seg), "pre-event segment, MAD",
                              (float(t[n_a]), float(t[n1 - 1])), sig.unit)
@@ -177,8 +172,54 @@ def _estimate_noise(sig: Signal, quiet: tuple[float, float] | None = None) -> No
                          None, sig.unit)
 
 
-def onset_time(sig: Signal, sigma: float) -> float:
+def filter_startup(sig: Signal) -> float:
+    """Duration [s] at the start of a CFC-filtered record that the filter's start-up leaves
+    unreliable when the record was filtered as cut (a zero-phase filter padded at the edge turns
+    the first samples' noise into a decaying transient of the raw noise's size): three noise
+    correlation times 3 / (2 B_eq), at least ``QUIET_GUARD``; 0 for an unfiltered channel."""
+    if sig.cfc is None:
+        return 0.0
+    return max(QUIET_GUARD, 3.0 / (2.0 * _dsp.noise_bandwidth(sig.fs, sig.cfc)))
+
+
+def _leading_segment(sig: Signal, start: int, guard: float) -> tuple[int, int, int] | None:
+    """The quiet leading segment of ``sig`` from sample ``start``: a linear fit to the first 5 %
+    (or the pre-zero data), extended until the channel leaves it by K_ONSET sigma or
+    ONSET_FRACTION of its range, minus ``guard`` [s] (a zero-phase filter spreads the event
+    backwards in time); the filter's start-up (``guard``) is also skipped at the beginning when
+    there is room. Returns (first sample, sample where the channel left the fit, end sample)
+    or None when the start holds no quiet segment."""
+    t, x = sig.t[start:], sig.data[start:]
+    n0 = max(MIN_QUIET_SAMPLES, int(0.05 * t.size))
+    if np.any(t < 0.0):
+        n0 = max(n0, int(np.searchsorted(t, 0.0)) - 2)
+    n0 = min(n0, t.size)
+    seg = _detrended(t[:n0], x[:n0])
+    s0 = _mad_sigma(seg)
+    rng = float(np.ptp(sig.data)) if sig.data.size else 0.0
+    if not (n0 >= MIN_QUIET_SAMPLES and s0 > 0 and s0 < 0.05 * rng):
+        return None
+    c = np.polyfit(t[:n0] - t[0], x[:n0], 1)
+    dev = np.abs(x - np.polyval(c, t - t[0]))
+    thr = max(K_ONSET * s0, ONSET_FRACTION * rng)
+    above = np.flatnonzero(dev > thr)
+    n_left = int(above[0]) if above.size else t.size
+    n1 = max(MIN_QUIET_SAMPLES, n_left - max(3, int(guard * sig.fs)))
+    n_a = int(guard * sig.fs) if (start == 0 and n1 - int(guard * sig.fs) >= MIN_QUIET_SAMPLES) \
+        else 0
+    return start + n_a, start + n_left, start + n1
+
+
+def onset_time(sig: Signal, sigma: float, _restart: bool = True) -> float:
     """First time [s] the channel leaves its initial level by more than the onset threshold.
+
+    A CFC-filtered record that was filtered as cut begins with the filter's start-up transient
+    (``filter_startup``); a crossing inside it is not taken as the onset when the record after
+    the start-up is quiet for at least another start-up duration (measured: on a Yade 5 m drop
+    filtered at CFC 60, the first sample read -4.9 m/s^2, the 0.5 g raw noise of the first
+    sample spread by the filter's edge padding; against a 168 m/s^2 peak it crossed the onset
+    threshold, so the onset was placed 80 ms early, the impact speed was not read and the
+    score fell to 0.36).
 
     A velocity channel (unit ``m/s``) is a ramp before the event (free fall), so its onset is
     that of its time derivative (constant -g, or +g, before the event), with the derivative's
@@ -186,7 +227,7 @@ def onset_time(sig: Signal, sigma: float) -> float:
     simulated one)."""
     if sig.unit == "m/s" and sig.t.size >= 3:
         d = Signal(sig.name, sig.t, np.gradient(sig.data, sig.t), "m/s^2", sig.cfc, sig.meta)
-        return onset_time(d, estimate_noise(d).sigma if sigma > 0.0 else 0.0)
+        return onset_time(d, estimate_noise(d).sigma if sigma > 0.0 else 0.0, _restart)
     x = sig.data
     n0 = max(3, min(MIN_QUIET_SAMPLES, x.size // 10))
     base = float(np.median(x[:n0]))
@@ -195,6 +236,17 @@ def onset_time(sig: Signal, sigma: float) -> float:
     if not idx.size:
         return float(sig.t[0])
     i = int(idx[0])
+    g = filter_startup(sig)
+    if _restart and g > 0.0 and sig.t[i] < sig.t[0] + g:
+        # a crossing inside the filter's start-up: when the record after it holds a quiet
+        # segment of another start-up duration before its own onset, the crossing was the
+        # start-up transient, not the event (a record that begins near the contact is kept)
+        late = sig.t >= sig.t[0] + g
+        if late.sum() >= 2 * n0:
+            cut = Signal(sig.name, sig.t[late], x[late], sig.unit, sig.cfc, sig.meta)
+            t_cut = onset_time(cut, sigma, _restart=False)
+            if t_cut >= float(cut.t[0]) + g:
+                return t_cut
     if i == 0:
         return float(sig.t[0])
     # linear interpolation of the crossing

@@ -113,3 +113,42 @@ def test_rebound_too_strong_on_velocity(t):
                                                     for f in w.other_features]
     reb = [s for f, s in feats if f == "rebound_too_strong"]
     assert reb and abs(reb[0] - 1.0) < 0.02
+
+
+def _filtered_as_cut(t_start: float, first: float | None, seed: int = 3) -> Signal:
+    """A 165 m/s^2, 60 ms half-sine contact pulse at t = 0 after free fall (0 m/s^2), 0.5 g
+    white noise at 12.5 kHz, the record cut at ``t_start`` and then filtered at CFC 60 (the
+    first raw sample set to ``first`` when given)."""
+    fs = 12500.0
+    t = np.arange(t_start, 0.12, 1.0 / fs)
+    x = np.where((t >= 0.0) & (t <= 0.06), 165.0 * np.sin(np.pi * np.clip(t, 0, 0.06) / 0.06), 0.0)
+    x = x + np.random.default_rng(seed).normal(0.0, 4.9, t.size)
+    if first is not None:
+        x[0] = first
+    return Signal("accel_z", t, _dsp.cfc(x, fs, 60.0), "m/s^2", 60.0)
+
+
+def test_filter_startup_transient_is_not_the_onset():
+    """A record filtered at CFC 60 after it was cut starts with the filter's start-up transient
+    (here the first raw sample at -15 m/s^2: the filtered record starts beyond the onset
+    threshold of this 165 m/s^2 pulse). The onset is still found at the contact (within 2 ms)
+    and the noise window lies after the start-up, as without the transient; a record that
+    begins 1 ms before the contact keeps its onset at the contact. Oracle: the pulse's start
+    (t = 0) and the white noise's 4.9 m/s^2 through CFC 60 (a fraction of it, not 0)."""
+    from crashdem.diagnosis.mismatch import K_ONSET, ONSET_FRACTION, filter_startup, onset_time
+
+    sig = _filtered_as_cut(-0.08, -15.0)
+    noise = estimate_noise(sig)
+    base = np.median(sig.data[:32])
+    thr = max(K_ONSET * noise.sigma, ONSET_FRACTION * np.ptp(sig.data))
+    assert abs(sig.data[0] - base) > thr  # the transient crosses the threshold (precondition)
+    g = filter_startup(sig)
+    assert 0.01 < g < 0.03
+    assert onset_time(sig, noise.sigma) == pytest.approx(0.0, abs=0.002)
+    assert noise.window[0] >= sig.t[0] + g - 1.0 / sig.fs and noise.window[1] < 0.0
+    clean = _filtered_as_cut(-0.08, None)
+    assert onset_time(clean, estimate_noise(clean).sigma) == pytest.approx(
+        onset_time(sig, noise.sigma), abs=0.0005)
+    assert noise.sigma == pytest.approx(estimate_noise(clean).sigma, rel=0.2)
+    late = _filtered_as_cut(-0.001, None)
+    assert onset_time(late, 0.5) < 0.002
