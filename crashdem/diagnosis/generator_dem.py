@@ -229,7 +229,10 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
     from crashdem.results import open_result
     from crashdem.run import run_scenario, share_packings
 
-    runs = store / "runs"
+    # one run directory per process: two processes asking for the same run on a cold cache
+    # would otherwise collide on its HDF5 file (measured: an HDF5 lock error stopped one of two
+    # validation processes); the cache entry below is written atomically
+    runs = store / "runs" / f"pid{os.getpid()}"
     runs.mkdir(parents=True, exist_ok=True)
     share_packings(runs, root / "packings")
     ov["scenario.name"] = f"diag_{key}"
@@ -249,9 +252,11 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
                                  s.unit, info["cfc"] if filtered else None,
                                  {"source": f"crashdem DEM {path.name}"})
     t = sigs["accel_z"].t
-    np.savez(f, t=t, info=json.dumps(info),
+    tmp = store / f"{key}.pid{os.getpid()}.tmp.npz"
+    np.savez(tmp, t=t, info=json.dumps(info),
              **{n: s.data for n, s in sigs.items()},
              **{f"{n}__unit": np.array(s.unit) for n, s in sigs.items()})
+    os.replace(tmp, f)
     try:  # the npz holds what is needed; keep the cache small
         path.unlink()
     except OSError:
