@@ -838,7 +838,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
                                t_end=float(rec[primary].t[-1] - shift0) + 0.01,
                                sample_rate=fs, cfc=rec[primary].cfc)
         simulator = PlanarSimulator(rom_base, settings, cat) if planar else \
-            RomSimulator(rom_base or RomParams(), settings)
+            RomSimulator(rom_base, settings)
     base_values: dict[str, float] = {}
     disc: dict[str, Signal] = {}
     depth_cal: Signal | None = None
