@@ -162,6 +162,19 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
             db = r.get("delta_bic_vs_reference")
             lines.append(f"| {ov or '-'} | {_fmt(r.get('score'))} | "
                          f"{'-' if db is None else f'{db:.1f}'} |")
+    det = fit.get("detectability")
+    if det and det.get("effects"):
+        lines += ["", f"Detectability: how far each search level moves the baseline simulation "
+                  f"({det['measure']}); the replicate packings move it by "
+                  f"{', '.join(f'{x:.2g}' for x in det['replicates'])}. A level below the least "
+                  f"of these ({det['threshold']:.2g}) differs from the model no more than another "
+                  f"packing of the same bed does: this resolution cannot show it.", "",
+                  "| effect | levels (separation) | visible from |", "|---|---|---|"]
+        for name, e in det["effects"].items():
+            lv = ", ".join(f"{v:.4g}: {x:.2g}" for v, x in e["levels"])
+            vf = e.get("visible_from")
+            lines.append(f"| {name} ({e['parameter']}, {e['unit']}) | {lv} | "
+                         f"{'none' if vf is None else f'{vf:.4g}'} |")
     sims = d["simulations"]
     lines += ["", "## Cost", "",
               f"Screening runs ({sims['screening_model']}): {sims['screening_runs']}; full simulations: "

@@ -653,3 +653,55 @@ def test_an_effect_stands_by_its_best_decisive_run():
     assert c.standing([rows[1], b_likely], floor)["b"] is b_likely
     d = c.decide(_FullTier(rows, 0.70, floor))
     assert d.confirmed is None and d.ambiguous == ["a", "b"]
+
+
+def test_detectability_separates_levels_from_the_realisation_scatter():
+    """A level that moves the baseline simulation less than the least different replicate
+    packing is "not visible at this resolution". Synthetic rows on a constant baseline, unit
+    noise, no model error: the separation is the mean squared offset (oracle: written out), so
+    replicates offset by 1 and 2 give 1 and 4 (threshold 1); cohesion levels (fading at the low
+    end) offset by 0.1, 0.5, 2 and 3 are visible from the third, whose weaker neighbour the
+    verdict names; a floor (fading at the high end) offset by 3, 2 and 0.5 is visible up to
+    the second; contact damping offset by 2 everywhere is visible at every level (no note);
+    particle rotation at most 0.5 at no level."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import REPLICATE, _detectability, _invisible_note
+    from crashdem.signal import Signal
+
+    t = np.linspace(-0.01, 0.1, 111)
+    base = {"accel_z": Signal("accel_z", t, np.zeros_like(t), "m/s^2")}
+    noise = {"accel_z": type("N", (), {"sigma": 1.0})()}
+    rep = type("R", (), {"channels": ["accel_z"], "baseline": base, "noise": noise,
+                         "fit": {"score_window_s": [0.0, 0.1], "model_error": {}}})()
+
+    def row(name, offset, value=None):
+        r = {"hypothesis": name, "aligned": {"accel_z": Signal("accel_z", t, np.full_like(
+            t, offset), "m/s^2")}}
+        if value is not None:
+            r["search_value"] = value
+        return r
+
+    coh = FS["cohesion"].values  # 3e4 ... 4.8e5, fades low
+    fl = FS["boundary_proximity"].values
+    rows = ([row(REPLICATE, 1.0), row(REPLICATE, 2.0)]
+            + [row("cohesion", o, v) for o, v in zip((0.1, 0.5, 0.5, 2.0, 3.0), coh)]
+            + [row("boundary_proximity", o, v) for o, v in zip((3, 3, 3, 3, 2.0, 0.5), fl)]
+            + [row("contact_damping", 2.0, v) for v in FS["contact_damping"].values]
+            + [row("particle_rotation", 0.5, v) for v in FS["particle_rotation"].values])
+    det = _detectability(rep, rows, FS)
+    assert det["replicates"] == pytest.approx([1.0, 4.0])
+    assert det["threshold"] == pytest.approx(1.0)
+    e = det["effects"]
+    assert e["cohesion"]["visible_from"] == coh[3]
+    assert e["cohesion"]["levels"][0] == pytest.approx([coh[0], 0.01])
+    assert e["boundary_proximity"]["visible_from"] == fl[4]
+    assert e["contact_damping"]["visible_from"] == FS["contact_damping"].values[-1]
+    assert e["particle_rotation"]["visible_from"] is None
+    note = _invisible_note(det, "cohesion", FS["cohesion"])
+    assert note.startswith(f"a cohesion of {coh[2]:.4g} Pa or less") and "not visible" in note
+    assert _invisible_note(det, "boundary_proximity", FS["boundary_proximity"]).startswith(
+        f"a floor_depth of {fl[5]:.4g} m or more")
+    assert _invisible_note(det, "contact_damping", FS["contact_damping"]) is None
+    assert "no level of it" in _invisible_note(det, "particle_rotation", FS["particle_rotation"])
+    # without replicates there is no scale to compare with
+    assert _detectability(rep, [r for r in rows if r["hypothesis"] != REPLICATE], FS) is None
