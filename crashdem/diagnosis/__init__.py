@@ -437,6 +437,47 @@ def _sign_convention(rec: dict[str, Signal], base: dict[str, Signal], channels: 
     return out, info
 
 
+#: a drop recording's acceleration whose free-fall level lies within this fraction of g of -g
+#: (or +g) is read as the kinematic acceleration instead of the specific force
+KINEMATIC_TOLERANCE = 0.1
+
+
+def _free_fall_convention(rec: dict[str, Signal], noise: Mapping[str, NoiseEstimate],
+                          channels: Sequence[str], t_onset: float, gravity: float = 9.81
+                          ) -> tuple[dict[str, Signal], dict[str, Any]]:
+    """The drop's acceleration as the specific force an accelerometer reads (0 in free fall).
+
+    Another code may write the body's kinematic acceleration (-g in free fall, +g with the
+    axis downwards) where a lab writes the specific force; the simulation's channel is the
+    latter. Over the pre-event window of the noise estimate, a mean within
+    ``KINEMATIC_TOLERANCE`` g of -g or +g is that convention and g is added back (or taken
+    off); any other level is left as recorded (a lab zeroes its channel before the test, a
+    residual bias is part of the recording). Only a window that ends before the onset
+    ``t_onset`` and whose noise is below g says what the free-fall level is (a record that
+    begins at the contact has none: measured, a raw Yade record's "quiet" window lay 2-8 ms
+    into the event, mean 87 m/s^2). Runs after the sign-convention check. Returns the
+    recording and ``{ch: {"free_fall_mean", "added", "read_as"}}`` (empty without such a
+    window)."""
+    out, info = dict(rec), {}
+    for ch in channels:
+        r, est = rec[ch], noise.get(ch)
+        if (ch != ACCEL or est is None or not est.window or r.unit != "m/s^2"
+                or est.window[1] > t_onset or not est.sigma < gravity):
+            continue
+        m = (r.t >= est.window[0]) & (r.t <= est.window[1])
+        if m.sum() < 8:
+            continue
+        level = float(np.mean(r.data[m]))
+        added = 0.0
+        if abs(abs(level) - gravity) <= KINEMATIC_TOLERANCE * gravity:
+            added = -math.copysign(gravity, level)
+            out[ch] = Signal(r.name, r.t, r.data + added, r.unit, r.cfc,
+                             {**r.meta, "free_fall": f"kinematic acceleration, {added:+g} m/s^2"})
+        info[ch] = {"free_fall_mean": level, "added": added,
+                    "read_as": "kinematic acceleration" if added else "specific force"}
+    return out, info
+
+
 def measured_impact_speed(acc: Signal | None, vel: Signal, noise_vel: NoiseEstimate,
                           sigma_acc: float, gravity: float = 9.81) -> dict[str, Any] | None:
     """Impact speed read from the recording's free-fall velocity before the onset.
@@ -811,6 +852,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     shift0 = onset_time(rec[primary], sigma_p) - onset_time(base[primary], 0.0)
     t0 = onset_time(rec[primary], sigma_p) - PRE_ONSET
     rec, signs = _sign_convention(rec, base, channels, shift0, t0)
+    free_fall: dict[str, Any] = {}
+    if not planar:
+        rec, free_fall = _free_fall_convention(rec, noise, channels, t0 + PRE_ONSET)
     # the filter class of the recording against the baseline's: from here on both are compared
     # at the recording's class; "before" (mismatch windows, score) is the baseline as the user
     # has it against the recording as processed here
@@ -998,6 +1042,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "impact_speed_check": speed,
         "filter_class": fclass,
         "sign_convention": signs,
+        "free_fall_convention": free_fall,
         "resampled": resampled,
         "decimated": decimated,
         "second_stage": second_stage,

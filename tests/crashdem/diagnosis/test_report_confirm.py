@@ -705,3 +705,32 @@ def test_detectability_separates_levels_from_the_realisation_scatter():
     assert "no level of it" in _invisible_note(det, "particle_rotation", FS["particle_rotation"])
     # without replicates there is no scale to compare with
     assert _detectability(rep, [r for r in rows if r["hypothesis"] != REPLICATE], FS) is None
+
+
+@pytest.mark.parametrize("level", [-9.81, +9.81, -0.4 * 9.81])
+def test_kinematic_acceleration_is_read_as_the_specific_force(layering_case, level):
+    """A drop recording whose acceleration reads -g in free fall (another code's kinematic
+    acceleration) or +g is the specific force shifted by g: the diagnosis adds it back before
+    comparing (``fit.free_fall_convention``) and reaches the same answer, parameters and score
+    as on the recording as a lab writes it. A level that is not +-g (here -0.4 g) is a bias
+    and stays as recorded. Oracle: the unshifted recording's diagnosis."""
+    from crashdem.signal import Signal
+
+    base = simulate(RomParams())
+    rec = layering_case.recording
+    a = rec["accel_z"]
+    shifted = {**rec, "accel_z": Signal("accel_z", a.t, a.data + level, a.unit, a.cfc)}
+    ref = diagnose(base, rec)
+    rep = diagnose(base, shifted)
+    ff = rep.fit["free_fall_convention"]["accel_z"]
+    assert ff["free_fall_mean"] == pytest.approx(
+        ref.fit["free_fall_convention"]["accel_z"]["free_fall_mean"] + level, abs=1e-9)
+    assert ref.fit["free_fall_convention"]["accel_z"]["added"] == 0.0
+    if abs(level) > 5.0:
+        assert ff["read_as"] == "kinematic acceleration" and ff["added"] == -level
+        assert rep.missing_physics == ref.missing_physics
+        assert rep.hypotheses[0]["name"] == ref.hypotheses[0]["name"]
+        assert rep.fit["after"]["overall"] == pytest.approx(ref.fit["after"]["overall"], abs=1e-6)
+    else:
+        assert ff["read_as"] == "specific force" and ff["added"] == 0.0
+        assert rep.fit["before"]["overall"] < ref.fit["before"]["overall"]
