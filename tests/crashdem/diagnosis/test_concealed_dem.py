@@ -59,7 +59,9 @@ GAP = ("DEM truth, measured with the full-model search (2026-11-22, session 7): 
        "at r = 0.10 m), floor depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
        "scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same physics "
        "score against each other; the same with the realisation floor of 4 replicate packings "
-       "(session 8); see docs/diagnosis.md 'Validation on DEM truth'")
+       "(session 8); the concealed cohesions (1.2-1.3e5 Pa) move the model less than another "
+       "packing does (separation 0.1 against 1.4, fit.detectability; session 10); see "
+       "docs/diagnosis.md 'Validation on DEM truth' and 'Detectability'")
 
 
 @pytest.fixture(scope="session")
