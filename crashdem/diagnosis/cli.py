@@ -223,8 +223,8 @@ def _convert(sig: Signal, model: str, mass: float | None) -> tuple[Signal, str |
     recorded). A force [N, kN] standing for ``accel_z`` is divided by the impactor's mass (the
     contact force on the body over its mass is the specific force an accelerometer on it reads;
     a force that includes the weight reads -g in free fall, like a kinematic acceleration, and
-    is handled as that: ``diagnose`` adds g back, ``_free_fall_convention``); a position or penetration [m, mm] standing for ``velocity_z`` is
-    differentiated (central differences; its sign is settled by the sign-convention check).
+    is handled as that: ``diagnose`` adds g back, ``_free_fall_convention``); a position or
+    penetration [m, mm] standing for ``velocity_z`` is differentiated (central differences; its sign is settled by the sign-convention check).
     Any other unit is an error naming the channel, its unit and the units accepted."""
     from crashdem.signal import to_si
 

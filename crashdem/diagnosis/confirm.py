@@ -462,9 +462,8 @@ class _Confirmation:
         unsupported = (self._search_support(screened["hypothesis"], tier)
                        if screened is not None and tier is not None and not self.model_free
                        else None)
-        if screened is not None and unsupported is None and (self.model_free or (
-                screened["delta_bic_vs_reference"] - floor["delta_bic"] >= -ACCEPT_MARGIN
-                and screened["score"] >= floor["score"] - CONFIRM_MIN_GAIN)):
+        if screened is not None and unsupported is None and (
+                self.model_free or _not_decisively_worse(screened, floor)):
             confirmed, best = screened["hypothesis"], screened
         claim_stood = confirmed is not None
         rivals = [] if self.model_free else sorted(
@@ -502,12 +501,11 @@ class _Confirmation:
         if run is None:
             return ("the screening's claim, but no located level of it ran on the search "
                     "simulator")
-        db, sc = float(run["delta_bic_vs_reference"]), float(run["score"])
-        if db - f["delta_bic"] >= -ACCEPT_MARGIN and sc >= f["score"] - CONFIRM_MIN_GAIN:
+        if _not_decisively_worse(run, f):
             return None
         return (f"the screening's claim, but on the search simulator its best level "
-                f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC {db:.1f}, score "
-                f"{sc:.3f}) is decisively worse than the best replicate packing there (Delta BIC "
+                f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC "
+                f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively worse than the best replicate packing there (Delta BIC "
                 f"{f['delta_bic']:.1f}, score {f['score']:.3f})")
 
     def verdicts(self, full: _FullTier, d: _Decision) -> dict[str, str]:
@@ -680,6 +678,14 @@ def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
             f"the screening's claim stands")
 
 
+def _not_decisively_worse(r: dict[str, Any], floor: dict[str, float]) -> bool:
+    """The rule a screening claim's run meets to stand: within ``ACCEPT_MARGIN`` of the
+    ``floor``'s Delta BIC and within ``CONFIRM_MIN_GAIN`` of its score (the full tier's floor in
+    ``decide``, the search tier's in ``_search_support``)."""
+    return (r["delta_bic_vs_reference"] - floor["delta_bic"] >= -ACCEPT_MARGIN
+            and r["score"] >= floor["score"] - CONFIRM_MIN_GAIN)
+
+
 def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
     """A scored run beats the reference (Delta BIC > ``ACCEPT_MARGIN``) and the realisation
     ``floor`` (Delta BIC above the best replicate's by ``REALISATION_MARGIN``, score by
@@ -707,12 +713,10 @@ def _separation(rep: Report, aligned: Mapping[str, Signal]) -> float:
     own residual weights (sensor noise and model-error floor, ``_full_rss``): the mean squared
     weighted difference on the residual samples, averaged over the channels [-]."""
     t0 = float(rep.fit["score_window_s"][0])
-    me = rep.fit.get("model_error", {})
     out = []
     for ch in rep.channels:
         base = rep.baseline[ch]
-        sm = me.get(ch, {}).get("sigma", 0.0)
-        w = 1.0 / math.sqrt(rep.noise[ch].sigma ** 2 + sm * sm)
+        w = _residual_weight(rep, ch)
         idx = np.flatnonzero(base.t >= t0)
         out.append(float(np.mean(((aligned[ch].data[idx] - base.data[idx]) * w) ** 2)))
     return float(np.mean(out))
@@ -885,16 +889,20 @@ def _confirmation_overrides(h: dict[str, Any],
     return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
 
 
+def _residual_weight(rep: Report, ch: str) -> float:
+    """Weight of channel ``ch``'s residuals: 1 / sqrt(sensor noise^2 + model-error floor^2)."""
+    sm = rep.fit.get("model_error", {}).get(ch, {}).get("sigma", 0.0)
+    return 1.0 / math.sqrt(rep.noise[ch].sigma ** 2 + sm * sm)
+
+
 def _full_rss(rep: Report, aligned: Mapping[str, Signal]) -> float:
     """Weighted residual sum of squares of aligned channels against the report's recording,
     on the residual samples of the diagnosis (weights: sensor noise and model-error floor)."""
     rss = 0.0
     t0 = float(rep.fit["score_window_s"][0])
-    me = rep.fit.get("model_error", {})
     for ch in rep.channels:
         rec = rep.recording[ch]
-        sm = me.get(ch, {}).get("sigma", 0.0)
-        w = 1.0 / math.sqrt(rep.noise[ch].sigma ** 2 + sm * sm)
+        w = _residual_weight(rep, ch)
         idx = np.flatnonzero(rec.t >= t0)
         stride = max(1, int(round(idx.size / max(1, rep.fit["n_samples"] // len(rep.channels)))))
         idx = idx[::stride]
