@@ -14,6 +14,11 @@ CSV grammar (summary)::
     0.0,0.01,0.0                                     data; ',' ';' or tab; ';' allows decimal ','
 
 The first column is time in s, ms or us. Empty cells are NaN (and rejected by validation).
+Also read, as other codes write them: whitespace-separated columns; the header as the last
+comment line right above the data when no header line precedes it (``# t  vz  az``: Yade's
+``plot.saveDataTxt``, ``numpy.savetxt(header=...)``); a unit as the name's suffix
+(``time_ms``, ``accel_g``, ``force_kN``: ``_SUFFIX_UNITS``) when nothing else gives one; files
+compressed with gzip or bzip2 (``.gz`` / ``.bz2``).
 
 HDF5 recording layout::
 
@@ -52,6 +57,15 @@ HDF5_FORMAT_TAG = "crashdem-recording"
 HDF5_VERSION = 1
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
 _TIME_NAMES = {"time", "t", "zeit", "temps", "tempo"}
+#: a unit written as the last ``_``-separated part of a column name (lower-cased) -> the unit;
+#: time units only for the time column (``vel_ms`` is not read as milliseconds)
+_SUFFIX_UNITS = {"g": "g", "mps2": "m/s^2", "ms2": "m/s^2", "mps": "m/s", "kmh": "km/h",
+                 "m": "m", "mm": "mm", "n": "N", "kn": "kN", "nm": "N*m", "rads": "rad/s",
+                 "degs": "deg/s", "rad": "rad", "deg": "deg"}
+_SUFFIX_TIME_UNITS = {"s": "s", "ms": "ms", "us": "us"}
+#: whitespace-separated header cells, a bracketed unit kept with its name (``time [s]``)
+_WS_HEADER_CELL = re.compile(r"[^\s\[(]+(?:\s*(?:\[[^\]]*\]|\([^)]*\)))?")
+_COMPRESSED = {".gz": "gzip", ".bz2": "bz2"}
 _HEADER_CELL = re.compile(r"^\s*(?P<name>.*?)\s*(?:\[(?P<u1>[^\]]*)\]|\((?P<u2>[^)]*)\))\s*$")
 #: relative tolerance on a common time vector when writing CSV
 CSV_TIME_RTOL = 1e-12
@@ -132,7 +146,10 @@ def detect_format(path: str | Path) -> str:
         with open(p, "rb") as f:
             if f.read(8) == b"\x89HDF\r\n\x1a\n":
                 return "hdf5"
-        if p.suffix.lower() in (".csv", ".txt", ".dat", ".tsv", ""):
+        suffix = p.suffix.lower()
+        if suffix in _COMPRESSED:
+            suffix = Path(p.stem).suffix.lower()
+        if suffix in (".csv", ".txt", ".dat", ".tsv", ""):
             return "csv"
     raise RecordingError(f"{p}: unknown recording format (expected CSV, HDF5 or an ISO-MME "
                          "folder/.mme/.zip)")
@@ -267,6 +284,39 @@ def _parse_meta_comment(line: str, meta: dict[str, dict[str, str]]) -> None:
     meta[name] = kv
 
 
+def _suffix_unit(name: str, time: bool = False) -> str | None:
+    """The unit a column name carries as its last ``_``-separated part (``time_ms``,
+    ``accel_g``), or None."""
+    head, sep, tail = name.strip().rpartition("_")
+    if not sep or not head:
+        return None
+    table = _SUFFIX_TIME_UNITS if time else _SUFFIX_UNITS
+    return table.get(tail.lower())
+
+
+def _header_cells(line: str, delim: str | None) -> list[str]:
+    """A header line cut into cells: by ``delim``, or (None) at whitespace keeping a bracketed
+    unit with its name; tab-separated headers lose their empty cells (Yade pads with tabs)."""
+    if delim is None:
+        return _WS_HEADER_CELL.findall(line)
+    cells = next(csv.reader([line], delimiter=delim))
+    return [c for c in cells if c.strip()] if delim == "\t" else cells
+
+
+def _read_text(path: Path) -> bytes:
+    raw = path.read_bytes()
+    how = _COMPRESSED.get(path.suffix.lower())
+    if how == "gzip":
+        import gzip
+
+        return gzip.decompress(raw)
+    if how == "bz2":
+        import bz2
+
+        return bz2.decompress(raw)
+    return raw
+
+
 def _split_header(cell: str) -> tuple[str, str | None]:
     m = _HEADER_CELL.match(cell)
     if m:
@@ -285,30 +335,57 @@ def _to_float(cell: str, decimal_comma: bool) -> float:
 
 
 def _read_csv(path: Path, units: Mapping[str, str] | None = None) -> dict[str, Signal]:
-    text = _decode_text(path.read_bytes())
+    try:
+        text = _decode_text(_read_text(path))
+    except (OSError, EOFError) as e:
+        raise RecordingError(f"{path}: cannot decompress ({e})") from None
     lines = text.splitlines()
     meta: dict[str, dict[str, str]] = {}
     body: list[tuple[int, str]] = []
+    last_comment: str | None = None  # the last comment line above the first body line
     for k, line in enumerate(lines, start=1):
         if line.lstrip().startswith("#"):
             _parse_meta_comment(line, meta)
+            if not body:
+                last_comment = line.lstrip().lstrip("#").strip()
         elif line.strip():
             body.append((k, line))
     if not body:
         raise RecordingError(f"{path}: no header line")
     head_line = body[0][1]
-    delim = "\t" if "\t" in head_line else ";" if (";" in head_line and "," not in head_line) \
-        else ","
+    delim: str | None = ("\t" if "\t" in head_line else
+                         ";" if (";" in head_line and "," not in head_line) else
+                         "," if "," in head_line else None)
     decimal_comma = delim == ";"
-    rows = list(csv.reader(io.StringIO("\n".join(l for _, l in body)), delimiter=delim))
-    header = [_split_header(c) for c in rows[0]]
+    if delim is None:  # whitespace-separated columns
+        rows = [l.split() for _, l in body]
+    else:
+        rows = list(csv.reader(io.StringIO("\n".join(l for _, l in body)), delimiter=delim))
+    cells = _header_cells(head_line, delim)
+    first_data = 1
+    if cells and all(_is_num(c, decimal_comma) for c in rows[0] if c.strip()):
+        # no header line: the names are in the comment line above the data (Yade's
+        # plot.saveDataTxt, numpy.savetxt(header=...)), when it has one per column
+        ncells = len([c for c in rows[0] if c.strip()])
+        names = _header_cells(last_comment or "", delim if delim is not None
+                              and delim in (last_comment or "") else None)
+        if last_comment is None or len(names) != ncells:
+            raise RecordingError(
+                f"{path}: line {body[0][0]} is data, and no header names its {ncells} columns "
+                f"(write a header line such as 'time [s],accel_z [g]', or a '# ' comment line "
+                f"right above the data with one name per column)")
+        cells = names
+        first_data = 0
+    header = [_split_header(c) for c in cells]
     ncol = len(header)
     if ncol < 2:
         raise RecordingError(f"{path}: header {head_line!r} has fewer than 2 columns "
                              "(time + channels)")
-    first_data = 1
-    if len(rows) > 1 and any(not _is_num(c, decimal_comma) for c in rows[1] if c.strip()):
-        units_row = rows[1]
+    if first_data == 1:
+        rows = [cells] + rows[1:]
+    if first_data == 1 and len(rows) > 1 and any(not _is_num(c, decimal_comma)
+                                                 for c in rows[1] if c.strip()):
+        units_row = rows[1] if delim is not None else _header_cells(body[1][1], None)
         if len(units_row) != ncol:
             raise RecordingError(f"{path}: line {body[1][0]}: unit row has {len(units_row)} "
                                  f"cells, header has {ncol}")
@@ -320,13 +397,18 @@ def _read_csv(path: Path, units: Mapping[str, str] | None = None) -> dict[str, S
         raise RecordingError(f"{path}: duplicate column names in the header {names}")
     t_name, t_unit = header[0]
     if t_unit is None:
-        t_unit = "s" if t_name.lower() in _TIME_NAMES else None
+        t_unit = ("s" if t_name.lower() in _TIME_NAMES else
+                  _suffix_unit(t_name, time=True) if t_name.lower().rpartition("_")[0]
+                  in _TIME_NAMES else None)
     if t_unit not in TIME_UNITS:
         raise RecordingError(f"{path}: first column {t_name!r} must be time in "
                              f"{sorted(TIME_UNITS)}, got unit {t_unit!r}")
     data = np.full((len(rows) - first_data, ncol), np.nan)
     for r, row in enumerate(rows[first_data:]):
         line_no = body[first_data + r][0]
+        if delim == "\t" and len(row) > ncol:  # tab-padded like its header
+            row = [c for c in row if c.strip()] if len([c for c in row if c.strip()]) == ncol \
+                else row
         if len(row) > ncol or (len(row) < ncol and any(c.strip() for c in row[ncol:])):
             raise RecordingError(f"{path}: line {line_no}: {len(row)} cells, header has {ncol}")
         for c, cell in enumerate(row[:ncol]):
@@ -342,7 +424,7 @@ def _read_csv(path: Path, units: Mapping[str, str] | None = None) -> dict[str, S
         name, unit = header[c]
         m = dict(meta.get(name, {}))
         if unit is None:
-            unit = m.pop("unit", None) or (units or {}).get(name)
+            unit = m.pop("unit", None) or (units or {}).get(name) or _suffix_unit(name)
         if unit is None:
             raise RecordingError(f"{path}: channel {name!r}: no unit in the header (write "
                                  f"'{name} [unit]', a '# channel: {name}; unit=UNIT' line, or "

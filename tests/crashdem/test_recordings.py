@@ -91,6 +91,57 @@ def test_csv_header_variants(tmp_path):
         np.testing.assert_allclose(out["force"].to_si().data, [2e3, 3e3, 4e3])
 
 
+def test_text_as_other_codes_write_it(tmp_path):
+    """Columns as another code or a script writes them read to the same channels (oracle: the
+    numbers written here): Yade's ``plot.saveDataTxt`` (header as a '# ' comment, tab-padded,
+    no units: given to the reader), ``numpy.savetxt(header=...)`` (whitespace, scientific
+    notation), whitespace columns with bracketed units, units as name suffixes, gzip / bzip2."""
+    import bz2
+    import gzip
+
+    t = np.array([0.0, 1e-4, 2e-4, 3e-4])
+    az = np.array([0.5, -1.25, 3.0, 40.0])
+    vz = np.array([-16.4, -16.3, -16.1, -15.2])
+    yade = "# t\t\tvz\t\taz\n" + "".join(f"{a}\t{b}\t{c}\n" for a, b, c in zip(t, vz, az))
+    (tmp_path / "yade.txt").write_text(yade, encoding="utf-8")
+    np.savetxt(tmp_path / "np.dat", np.c_[t, vz, az], header="t vz az")
+    (tmp_path / "ws.dat").write_text(
+        "time [ms]   velocity_z [m/s]   accel_z [m/s^2]\n"
+        + "".join(f"{1e3 * a:g}   {b}   {c}\n" for a, b, c in zip(t, vz, az)), encoding="utf-8")
+    (tmp_path / "suffix.csv").write_text(
+        "time_ms,vz_mps,az_g\n" + "".join(f"{1e3 * a:g},{b},{float(c / 9.80665)!r}\n"
+                                            for a, b, c in zip(t, vz, az)), encoding="utf-8")
+    (tmp_path / "yade.txt.gz").write_bytes(gzip.compress(yade.encode()))
+    (tmp_path / "yade.txt.bz2").write_bytes(bz2.compress(yade.encode()))
+    units = {"vz": "m/s", "az": "m/s^2"}
+    for name, names in [("yade.txt", ("vz", "az")), ("np.dat", ("vz", "az")),
+                        ("ws.dat", ("velocity_z", "accel_z")), ("suffix.csv", ("vz_mps", "az_g")),
+                        ("yade.txt.gz", ("vz", "az")), ("yade.txt.bz2", ("vz", "az"))]:
+        assert detect_format(tmp_path / name) == "csv"
+        out = read_recording(tmp_path / name, strict_fs=False, units=units)
+        v, a = out[names[0]].to_si(), out[names[1]].to_si()
+        np.testing.assert_allclose(v.t, t, rtol=0, atol=1e-15)
+        np.testing.assert_allclose(v.data, vz, rtol=1e-15)
+        np.testing.assert_allclose(a.data, az, rtol=1e-15)
+        assert (v.unit, a.unit) == ("m/s", "m/s^2"), name
+
+
+def test_text_without_names_and_suffix_limits(tmp_path):
+    """Data with no header line and no comment naming every column is refused by line; a time
+    suffix is read on the time column only (``vel_ms`` has no unit); a unit the header gives
+    wins over a suffix."""
+    (tmp_path / "bare.txt").write_text("# run 3\n0 1 2\n0.001 2 3\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"bare\.txt: line 2 is data, and no header names "
+                                             r"its 3 columns"):
+        read_recording(tmp_path / "bare.txt", strict_fs=False)
+    (tmp_path / "ms.csv").write_text("time_ms,vel_ms\n0,1\n1,2\n", encoding="utf-8")
+    with pytest.raises(RecordingError, match=r"channel 'vel_ms': no unit"):
+        read_recording(tmp_path / "ms.csv", strict_fs=False)
+    (tmp_path / "win.csv").write_text("time_ms,acc_g [m/s^2]\n0,1\n1,2\n", encoding="utf-8")
+    r = read_recording(tmp_path / "win.csv", strict_fs=False)["acc_g"]
+    assert r.unit == "m/s^2" and r.t[1] == pytest.approx(1e-3)
+
+
 def test_csv_channel_comment_metadata(tmp_path):
     """'# channel: name; cfc=..; iso_code=..' lines set the filter class and ISO code."""
     (tmp_path / "m.csv").write_text(
