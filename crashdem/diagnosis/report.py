@@ -77,18 +77,34 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                          f"{w['max_residual_sigma']:.1f} | {w['description']} |")
     else:
         lines.append("No window exceeds the noise threshold.")
-    lines += ["", "## Hypotheses (ranked by BIC)", "",
-              "| rank | name | parameters (± 1 sigma) | score before | score after | Delta BIC vs recal. | penalty | evidence |",
-              "|---|---|---|---|---|---|---|---|"]
+    reranked = "ranking" in fit
+    lines += ["", "## Hypotheses (" + (fit["ranking"] if reranked else "ranked by BIC") + ")", ""]
+    if reranked:
+        lines += ["| rank | name | parameters (± 1 sigma) | score before | score after | Delta BIC "
+                  "vs recal. | penalty | evidence | screening rank | full model: Delta BIC over "
+                  "the realisation floor |",
+                  "|---|---|---|---|---|---|---|---|---|---|"]
+    else:
+        lines += ["| rank | name | parameters (± 1 sigma) | score before | score after | Delta BIC "
+                  "vs recal. | penalty | evidence |",
+                  "|---|---|---|---|---|---|---|---|"]
     for i, h in enumerate(d["hypotheses"], 1):
         pars = h["parameters"] if h["parameters"] else h["recalibration"]
         unc = h["uncertainty"] if h["parameters"] else h["recalibration_uncertainty"]
         units = h.get("units", {})
         ptxt = "; ".join(f"{k} = {_fmt(v)} ± {_fmt(unc.get(k))} {units.get(k, '')}".strip()
                          for k, v in pars.items())
-        lines.append(f"| {i} | {h['name']} | {ptxt} | {_fmt(h['score_before'])} | "
-                     f"{_fmt(h['score_after'])} | {h['delta_bic_vs_recalibration']:.1f} | "
-                     f"{h['complexity_penalty']:.1f} | {h['evidence']} |")
+        row = (f"| {i} | {h['name']} | {ptxt} | {_fmt(h['score_before'])} | "
+               f"{_fmt(h['score_after'])} | {h['delta_bic_vs_recalibration']:.1f} | "
+               f"{h['complexity_penalty']:.1f} | {h['evidence']} |")
+        if reranked:
+            ev = h.get("full_model_evidence")
+            row += (f" {h.get('screening_rank', '')} | "
+                    + (f"{ev['delta_bic_vs_floor']:.1f} ({ev['tier']})" if ev else
+                       "0 (the baseline physics: its best realisation)"
+                       if h["name"] == "recalibration" else "not run")
+                    + " |")
+        lines.append(row)
     sc = fit.get("sensor_check") or {}
     lines += ["", "## Accelerometer vs measured velocity (model-free sensor check)", ""]
     if not sc.get("applicable"):

@@ -217,8 +217,10 @@ def test_verdict_of_a_screening_claim_that_another_effect_replaces(layering_case
 
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=2,
                               hypotheses=["soil_layering", "cohesion", "initial_conditions"])
-    assert rep.hypotheses[0]["name"] == "soil_layering"  # the screening's claim
+    by = {h["name"]: h for h in rep.hypotheses}
+    assert by["soil_layering"]["screening_rank"] == 1  # the screening's claim
     assert rep.missing_physics == "cohesion", rep.decision
+    assert rep.hypotheses[0]["name"] == "cohesion"  # the answer ranks first
     why = rep.fit["confirmation_verdicts"]
     assert why["cohesion"] == "named"
     assert why["soil_layering"].startswith("the screening's claim stood"), why
@@ -781,3 +783,46 @@ def test_a_claim_must_also_hold_on_the_search_tier(coarse_level_db, coarse_score
         assert f"Delta BIC {coarse_level_db:.1f}" in d.unsupported and "26.2" in d.unsupported
     # without the search tier (the replicates among the full runs) the rule does not apply
     assert c.decide(full).confirmed == "soil_layering"
+
+
+@pytest.mark.parametrize("confirmed", ["boundary_proximity", None])
+def test_ranking_follows_the_confirmation(confirmed):
+    """After the full-model confirmation the hypotheses are ordered by the evidence it ended
+    with: the answer first (the named effect, else the recalibration), then the effects the
+    full model ran by their best located run's Delta BIC above the realisation floor (the
+    recalibration at 0; a level at the fading end does not count), then those it did not run
+    in the screening's order. Oracle: the order worked out by hand from the numbers below."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
+                                            _realisation_floor)
+
+    def run(name, db, score, value=None):
+        r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
+             "delta_bic_vs_reference": db}
+        if value is not None:
+            r["search_value"] = value
+        return r
+
+    rows = ([run("recalibration", 0.0, 0.80), run("cohesion", -5.0, 0.78),
+             run("boundary_proximity", 40.0, 0.86, 0.7), run("boundary_proximity", 60.0, 0.88, 1.25),
+             run("soil_layering", 12.0, 0.81, 0.3)]
+            + [run(REPLICATE, db, 0.80) for db in (15.0, 3.0)])
+    full = _FullTier(rows, 0.80, _realisation_floor(rows, 0.80))
+    screening = ["cohesion", "recalibration", "soil_layering", "boundary_proximity",
+                 "structural_crush"]
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"hypotheses": [{"name": n} for n in screening], "fit": {}})()
+    c.searched = dict(FS)
+    c.rerank(full, None, type("D", (), {"confirmed": confirmed})())
+    order = [h["name"] for h in c.rep.hypotheses]
+    rest = ["soil_layering", "cohesion", "structural_crush"]  # -3, -20 over the floor; not run
+    assert order == (["boundary_proximity", "recalibration"] + rest if confirmed else
+                     ["recalibration", "boundary_proximity"] + rest)
+    by = {h["name"]: h for h in c.rep.hypotheses}
+    assert [by[n]["screening_rank"] for n in screening] == [1, 2, 3, 4, 5]
+    ev = by["boundary_proximity"]["full_model_evidence"]
+    assert (ev["value"], ev["delta_bic_vs_reference"], ev["delta_bic_vs_floor"]) == (0.7, 40.0, 25.0)
+    assert by["cohesion"]["full_model_evidence"]["delta_bic_vs_floor"] == -20.0
+    assert "full_model_evidence" not in by["structural_crush"]
+    assert "full_model_evidence" not in by["recalibration"]
+    assert c.rep.fit["ranking"].startswith("the answer first")
