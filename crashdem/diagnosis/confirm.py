@@ -32,7 +32,7 @@ from crashdem.diagnosis import (FILTER_CLASS_VARIANT, Report, Simulator, _at_off
                                 diagnose)
 from crashdem.diagnosis.catalogue import RECALIBRATION
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
-from crashdem.diagnosis.mismatch import align, onset_time
+from crashdem.diagnosis.mismatch import align, locate_mismatch, onset_time
 from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
@@ -597,8 +597,42 @@ class _Confirmation:
         rep.simulations["full_simulations"] = len(rows)
         rep.simulations["full_wall_time_s"] = t_full
         rep.missing_physics = d.confirmed
+        self.settle(d)
         rep.decision += "; " + self.sentence(full, tier, d)
         self.rerank(full, tier, d)
+
+    def settle(self, d: _Decision) -> None:
+        """Make the report's best explanation, "after" fit, refitted signals and remaining
+        mismatch those of the confirmation's answer, not of the screening's choice: the named
+        effect's full run (its screening refit's scores in ``fit.after``), else the
+        recalibration (its screening refit), as ``diagnose`` reports when nothing beats it.
+        The screening's own choice stays in ``fit.screening_after``. Before, a claim the full
+        model rejected still headed the report ("best explanation", the orange "refitted"
+        curve and the score "after")."""
+        rep = self.rep
+        if d.confirmed is None and rep.best in (None, RECALIBRATION.name):
+            return  # the screening's answer already (within noise, or the recalibration)
+        answer = d.confirmed or RECALIBRATION.name
+        if rep.best == answer:  # the screening's choice confirmed: its full run is the refit
+            rep.after_mismatch = [w for ch in self.chans if ch in rep.refitted
+                                  for w in locate_mismatch(rep.recording[ch], rep.refitted[ch],
+                                                           rep.noise[ch], shift=0.0)]
+            return
+        rep.fit["screening_after"] = {"hypothesis": rep.fit.get("after_hypothesis"),
+                                      "overall": rep.fit["after"]["overall"],
+                                      "residual_rms_sigma": rep.fit.get("residual_rms_sigma_after")}
+        fr = rep.fits.get(answer)
+        if fr is not None:
+            rep.fit["after"] = fr.scores
+            rep.fit["after_hypothesis"] = answer
+            rep.fit["residual_rms_sigma_after"] = fr.rms_sigma
+        rep.best = answer
+        if d.confirmed is None and fr is not None:
+            rep.refitted = dict(fr.aligned)
+        if rep.refitted:
+            rep.after_mismatch = [w for ch in self.chans if ch in rep.refitted
+                                  for w in locate_mismatch(rep.recording[ch], rep.refitted[ch],
+                                                           rep.noise[ch], shift=0.0)]
 
     def rerank(self, full: _FullTier, tier: _SearchTier | None, d: _Decision) -> None:
         """Order ``rep.hypotheses`` by the evidence the confirmation ended with, not the

@@ -177,6 +177,9 @@ def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
     rep = screen_then_confirm(simulate(RomParams()), rec, _scenario_rom_simulator(
         calls, rec, same_as_recording=("cohesion", "replicate")), replicates=reps, **kw)
     assert rep.missing_physics is None, rep.decision
+    # the answer heads the report: the recalibration, else the named effect
+    assert rep.best == "recalibration" and rep.hypotheses[0]["name"] == "recalibration"
+    assert named.best == "cohesion" and named.hypotheses[0]["name"] == "cohesion"
     rf = rep.fit["realisation"]
     assert rf["tier"] == "full simulator" and len(rf["runs"]) == 2
     assert [r["overrides"] for r in rf["runs"]] == reps
@@ -826,3 +829,30 @@ def test_ranking_follows_the_confirmation(confirmed):
     assert "full_model_evidence" not in by["structural_crush"]
     assert "full_model_evidence" not in by["recalibration"]
     assert c.rep.fit["ranking"].startswith("the answer first")
+
+
+@pytest.mark.parametrize("confirmed", [None, "cohesion"])
+def test_report_settles_on_the_confirmations_answer(layering_case, confirmed):
+    """The screening claims the layering; when the full model rejects it (nothing named) the
+    report's best explanation, "after" fit, refitted curve and remaining mismatch become the
+    recalibration's (its screening refit), and when it names another effect, that effect's;
+    the screening's choice is kept in ``fit.screening_after``."""
+    from crashdem.diagnosis.confirm import _Confirmation
+
+    rep = diagnose(simulate(RomParams()), layering_case.recording)
+    assert rep.best == "soil_layering"
+    claim_after = rep.fit["after"]["overall"]
+    c = object.__new__(_Confirmation)
+    c.rep, c.chans = rep, rep.channels
+    c.settle(type("D", (), {"confirmed": confirmed})())
+    answer = confirmed or "recalibration"
+    assert rep.best == answer and rep.fit["after_hypothesis"] == answer
+    assert rep.fit["after"] == rep.fits[answer].scores
+    assert rep.fit["screening_after"] == {"hypothesis": "soil_layering", "overall": claim_after,
+                                          "residual_rms_sigma":
+                                              rep.fits["soil_layering"].rms_sigma}
+    if confirmed is None:
+        assert rep.refitted["accel_z"] is rep.fits["recalibration"].aligned["accel_z"]
+        # the recalibration leaves the layering's second peak unexplained
+        assert rep.after_mismatch and rep.fits["recalibration"].rms_sigma > \
+            rep.fits["soil_layering"].rms_sigma
