@@ -856,3 +856,47 @@ def test_report_settles_on_the_confirmations_answer(layering_case, confirmed):
         # the recalibration leaves the layering's second peak unexplained
         assert rep.after_mismatch and rep.fits["recalibration"].rms_sigma > \
             rep.fits["soil_layering"].rms_sigma
+
+
+def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
+    """An effect whose best search level is the one at the end of its span where it fades
+    (layering: the deepest interface) is not located by any of its runs: the recording asks for
+    less of it than the span gives. Numbers: the Yade floor recording 12 (bed 0.76 m) at
+    0.075 m grains searched on the scenario itself, where layering's deepest level fitted best
+    (74.8) and layering was named at 0.4 m (38.7) over the floor at 0.6 m (21.5); now the floor
+    is named and layering's verdict says why not. Control: the same rows with the deepest level
+    below 38.7 name layering."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
+                                            _realisation_floor)
+
+    def run(name, db, score, value=None):
+        r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
+             "delta_bic_vs_reference": db}
+        if value is not None:
+            r["search_value"] = value
+        return r
+
+    def decide(deepest):
+        rows = ([run("recalibration", 0.0, 0.691), run("soil_layering", 18.0, 0.70)]
+                + [run("soil_layering", db, sc, v) for db, sc, v in
+                   ((-4.5, 0.616, 0.2), (12.9, 0.737, 0.3), (38.7, 0.748, 0.4),
+                    (deepest, 0.832, 0.5))]
+                + [run("boundary_proximity", db, sc, v) for db, sc, v in
+                   ((21.5, 0.761, 0.6), (14.7, 0.622, 0.7), (6.8, 0.568, 0.8),
+                    (-8.8, 0.484, 1.25))]
+                + [run(REPLICATE, db, sc) for db, sc in ((-2.6, 0.595), (12.4, 0.589))])
+        full = _FullTier(rows, 0.691, _realisation_floor(rows, 0.691))
+        c = object.__new__(_Confirmation)
+        c.rep = type("R", (), {"missing_physics": "soil_layering", "fit": {}})()
+        c.searched, c.model_free = dict(FS), None
+        return c, full, c.decide(full)
+
+    c, full, d = decide(74.8)
+    assert c.faded_out(full.rows) == {"soil_layering"}
+    assert d.confirmed == "boundary_proximity"
+    why = c.verdicts(full, d)["soil_layering"]
+    assert why.startswith("its best level is at the end of the span where the effect fades "
+                          "(interface_depth = 0.5 m, Delta BIC 74.8)"), why
+    c, full, d = decide(30.0)
+    assert c.faded_out(full.rows) == set() and d.confirmed == "soil_layering"
