@@ -28,7 +28,8 @@ from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from crashdem.diagnosis import (FILTER_CLASS_VARIANT, Report, Simulator, _at_off, _si, catalogue,
+from crashdem.diagnosis import (FILTER_CLASS_VARIANT, SPEED_OFFSET_SIGMAS, Report, Simulator,
+                                _at_off, _si, _speed_found, catalogue,
                                 diagnose)
 from crashdem.diagnosis.catalogue import RECALIBRATION
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
@@ -62,10 +63,11 @@ REPLICATE = "replicate"
 #: (median 12); 10 on top of it would drop 2 of the 16 named effects (a damping and a floor
 #: beating it by 2.0 / 2.4) and prevent no wrong claim, see docs/diagnosis.md
 REALISATION_MARGIN = 0.0
-#: a measured impact-speed offset of at least this many standard deviations is model-free
-#: evidence for ``initial_conditions`` (like the sensor check): the claim stands whatever the
-#: soil model's realisation scatter
-SPEED_CHECK_SIGMAS = 5.0
+#: a measured impact-speed offset of at least this many standard deviations (and
+#: ``SPEED_OFFSET_MIN_FRACTION`` of the speed: ``diagnosis._speed_found``) is model-free evidence
+#: for ``initial_conditions`` (like the sensor check): the claim stands whatever the soil
+#: model's realisation scatter (the screening names it by the same rule)
+SPEED_CHECK_SIGMAS = SPEED_OFFSET_SIGMAS
 
 Row = dict[str, Any]
 Request = tuple[str, dict[str, Any], "float | None"]
@@ -210,8 +212,7 @@ class _Confirmation:
                         and (bool(rep.fit.get("sensor_check", {}).get("detected"))
                              or bool(fclass.get("mismatch"))))
         spd = rep.fit.get("impact_speed_check") or {}
-        self.speed_measured = bool(rep.missing_physics == "initial_conditions" and spd.get("used")
-                                   and abs(spd["offset"]) >= SPEED_CHECK_SIGMAS * spd["sigma"])
+        self.speed_measured = rep.missing_physics == "initial_conditions" and _speed_found(spd)
         self.model_free = ("the sensor check" if self.checked else
                            "the measured impact speed" if self.speed_measured else None)
         self.top_k = top_k
@@ -325,10 +326,15 @@ class _Confirmation:
         Yade floor recording 12 (bed 0.76 m): layering's best level was its deepest, 0.5 m
         (Delta BIC 74.8), and layering was named at 0.4 m (38.7) over the floor at 0.6 m (21.5);
         on the 46 reports of the identity check no named effect peaks at its fading end."""
-        best = _best_rows(r for r in rows if "search_value" in r and not r.get("refined")
-                          and r["hypothesis"] in self.searched and "rss" in r)
+        lv = [r for r in rows if "search_value" in r and not r.get("refined")
+              and r["hypothesis"] in self.searched and "rss" in r]
+        best = _best_rows(lv)
+        inner = _best_rows(r for r in lv if self.searched[r["hypothesis"]].located(r["search_value"]))
+        # strictly better than every level short of the end (a tie locates nothing either way)
         return {n for n, r in best.items()
-                if not self.searched[n].located(r["search_value"])}
+                if not self.searched[n].located(r["search_value"])
+                and (n not in inner or inner[n]["delta_bic_vs_reference"]
+                     < r["delta_bic_vs_reference"])}
 
     def located(self, r: Row) -> bool:
         """A scored run that can stand for its effect: not a search run at the end of the span
