@@ -130,6 +130,24 @@ def test_dem_null_cases_claim_no_missing_physics(dem_runs):
         assert r.missing_physics is None, (c.seed, r.decision)
 
 
+def test_dem_report_heads_with_its_answer(dem_runs):
+    """Every confirmed DEM-truth report is ordered by the confirmation's evidence: the answer
+    first (the named effect, else the recalibration), as ``best`` and the "after" fit; the
+    effects the full model ran then by their Delta BIC above the realisation floor, never
+    increasing; each entry keeps its screening rank (a permutation of 1..n)."""
+    for c, r, _, _ in dem_runs:
+        answer = r.missing_physics or "recalibration"
+        names = [h["name"] for h in r.hypotheses]
+        assert names[0] == answer and r.best == answer, (c.effect, c.seed, names[:3], r.best)
+        assert r.fit["after_hypothesis"] == answer
+        assert sorted(h["screening_rank"] for h in r.hypotheses) == list(range(1, len(names) + 1))
+        ranked = [h.get("full_model_evidence", {}).get("delta_bic_vs_floor", 0.0)
+                  if h["name"] != "recalibration" else 0.0
+                  for h in r.hypotheses[1:] if "full_model_evidence" in h
+                  or h["name"] == "recalibration"]
+        assert ranked == sorted(ranked, reverse=True), (c.effect, c.seed, ranked)
+
+
 #: full runs of the full-model search (every level of every searched effect; its one
 #: refinement run is counted apart) and of the replicate packings of the baseline
 N_SEARCH = sum(len(fs.values) for fs in DROP.full_search.values())
