@@ -647,9 +647,7 @@ class _Confirmation:
             return  # the screening's answer already (within noise, or the recalibration)
         answer = d.confirmed or RECALIBRATION.name
         if rep.best == answer:  # the screening's choice confirmed: its full run is the refit
-            rep.after_mismatch = [w for ch in self.chans if ch in rep.refitted
-                                  for w in locate_mismatch(rep.recording[ch], rep.refitted[ch],
-                                                           rep.noise[ch], shift=0.0)]
+            self.remaining_mismatch()
             return
         rep.fit["screening_after"] = {"hypothesis": rep.fit.get("after_hypothesis"),
                                       "overall": rep.fit["after"]["overall"],
@@ -662,6 +660,12 @@ class _Confirmation:
         rep.best = answer
         if d.confirmed is None and fr is not None:
             rep.refitted = dict(fr.aligned)
+        self.remaining_mismatch()
+
+    def remaining_mismatch(self) -> None:
+        """The report's remaining mismatch windows: the recording against the refitted
+        signals (none without them)."""
+        rep = self.rep
         if rep.refitted:
             rep.after_mismatch = [w for ch in self.chans if ch in rep.refitted
                                   for w in locate_mismatch(rep.recording[ch], rep.refitted[ch],
