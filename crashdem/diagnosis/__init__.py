@@ -683,15 +683,23 @@ def _impact_speed_check(rec: Mapping[str, Signal], noise: Mapping[str, NoiseEsti
     return speed
 
 
+def _remaining_mismatch(rec: Mapping[str, Signal], fitted: Mapping[str, Signal],
+                        noise: Mapping[str, NoiseEstimate],
+                        channels: Sequence[str]) -> list[MismatchWindow]:
+    """The mismatch windows the recording keeps against fitted (already aligned) signals."""
+    out: list[MismatchWindow] = []
+    for ch in channels:
+        out += locate_mismatch(rec[ch], fitted[ch], noise[ch], shift=0.0)
+    return out
+
+
 def _hypothesis_entry(r: FitResult, h: Hypothesis, recal: FitResult, score_before: float,
                       windows: list[MismatchWindow], base_rms: float, rec: Mapping[str, Signal],
                       noise: Mapping[str, NoiseEstimate], channels: Sequence[str],
                       check: Mapping[str, Any] | None) -> dict[str, Any]:
     """One ``hypotheses`` entry of report.json for the fit ``r`` of ``h`` (``check``: the
     model-free sensor check when it found this sensor)."""
-    after_r: list[MismatchWindow] = []
-    for ch in channels:
-        after_r += locate_mismatch(rec[ch], r.aligned[ch], noise[ch], shift=0.0)
+    after_r = _remaining_mismatch(rec, r.aligned, noise, channels)
     own = [p.name for p in h.parameters]
     if r.variant == FILTER_CLASS_VARIANT:
         own = ["filter_class"]
@@ -1043,10 +1051,7 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
             missing, best_name, chosen = best2.hypothesis, best2.hypothesis, best2
         ranked = rank(list(fits.values()))
 
-    after = []
-    if chosen is not None:
-        for ch in channels:
-            after += locate_mismatch(rec[ch], chosen.aligned[ch], noise[ch], shift=0.0)
+    after = _remaining_mismatch(rec, chosen.aligned, noise, channels) if chosen is not None else []
     hyp_out = [_hypothesis_entry(r, cat.get(r.hypothesis), recal, base_scores["overall"], windows,
                                  base_rms, rec, noise, channels,
                                  check if sensor_found and r.hypothesis == "sensor_dynamics"

@@ -29,11 +29,11 @@ from typing import Any, Iterable, Mapping, Sequence
 import numpy as np
 
 from crashdem.diagnosis import (FILTER_CLASS_VARIANT, SPEED_OFFSET_SIGMAS, Report, Simulator,
-                                _at_off, _si, _speed_found, catalogue,
-                                diagnose)
+                                _at_off, _remaining_mismatch, _si, _speed_found,
+                                catalogue, diagnose)
 from crashdem.diagnosis.catalogue import RECALIBRATION
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
-from crashdem.diagnosis.mismatch import align, locate_mismatch, onset_time
+from crashdem.diagnosis.mismatch import align, onset_time
 from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
@@ -332,10 +332,10 @@ class _Confirmation:
         the Yade free-rotation recording 12 lost its right answer on the default two-tier path
         (its coarse levels peak at rolling resistance 0.2, Delta BIC 42.5, with no rival). On the
         46 reports of the identity check no decision changes."""
-        lv = [r for r in rows if "search_value" in r and not r.get("refined")
-              and r["hypothesis"] in self.searched and "rss" in r]
+        lv = [r for r in _scored_levels(rows) if r["hypothesis"] in self.searched]
         best = _best_rows(lv)
-        inner = _best_rows(r for r in lv if self.searched[r["hypothesis"]].located(r["search_value"]))
+        inner = _best_rows(r for r in lv
+                           if self.searched[r["hypothesis"]].located(r["search_value"]))
         # strictly better than every level short of the end (a tie locates nothing either way)
         return {n for n, r in best.items()
                 if not self.searched[n].located(r["search_value"])
@@ -535,7 +535,8 @@ class _Confirmation:
             return None
         return (f"the screening's claim, but on the search simulator its best level "
                 f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC "
-                f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively worse than the best replicate packing there (Delta BIC "
+                f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively "
+                f"worse than the best replicate packing there (Delta BIC "
                 f"{f['delta_bic']:.1f}, score {f['score']:.3f})")
 
     def verdicts(self, full: _FullTier, d: _Decision) -> dict[str, str]:
@@ -560,8 +561,7 @@ class _Confirmation:
                 err = next((x.get("error") for x in rows
                             if x["hypothesis"] == name and "error" in x), None)
                 fs = self.searched.get(name)
-                lv = _best_rows(x for x in rows if x["hypothesis"] == name and "rss" in x
-                                and "search_value" in x and not x.get("refined"))
+                lv = _best_rows(x for x in _scored_levels(rows) if x["hypothesis"] == name)
                 why = (f"the full model could not run it ({err})" if err and name not in every
                        else "its best level is at the end of the span where the effect fades "
                        f"({fs.parameter} = {lv[name]['search_value']:.4g} {fs.unit}, Delta "
@@ -667,9 +667,9 @@ class _Confirmation:
         signals (none without them)."""
         rep = self.rep
         if rep.refitted:
-            rep.after_mismatch = [w for ch in self.chans if ch in rep.refitted
-                                  for w in locate_mismatch(rep.recording[ch], rep.refitted[ch],
-                                                           rep.noise[ch], shift=0.0)]
+            rep.after_mismatch = _remaining_mismatch(
+                rep.recording, rep.refitted, rep.noise,
+                [ch for ch in self.chans if ch in rep.refitted])
 
     def rerank(self, full: _FullTier, tier: _SearchTier | None, d: _Decision) -> None:
         """Order ``rep.hypotheses`` by the evidence the confirmation ended with, not the
@@ -924,6 +924,11 @@ def _best_rows(rows: Iterable[dict[str, Any]]) -> dict[str, dict[str, Any]]:
                 or r["delta_bic_vs_reference"] > best[r["hypothesis"]]["delta_bic_vs_reference"]):
             best[r["hypothesis"]] = r
     return best
+
+
+def _scored_levels(rows: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The scored search-level runs among ``rows``, refinements aside."""
+    return [r for r in rows if "search_value" in r and not r.get("refined") and "rss" in r]
 
 
 def _level_rows(rows: list[dict[str, Any]], name: str) -> list[dict[str, Any]]:

@@ -22,6 +22,16 @@ impact_velocity = 16.4
 """
 
 
+def _run(name, db, score, value=None):
+    """A scored confirmation row (the shape ``_Confirmation`` rules read): hypothesis, Delta BIC
+    against the reference, score and, for a search level, its value."""
+    r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
+         "delta_bic_vs_reference": db}
+    if value is not None:
+        r["search_value"] = value
+    return r
+
+
 @pytest.fixture(scope="module")
 def layering_case():
     return concealed_case(31, "soil_layering")
@@ -617,12 +627,8 @@ def test_two_effects_closer_than_the_realisation_scatter_are_not_told_apart(repl
     from crashdem.diagnosis.confirm import (REPLICATE, _ambiguity_margin, _Confirmation,
                                             _FullTier, _realisation_floor)
 
-    def run(name, db, score):
-        return {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
-                "delta_bic_vs_reference": db}
-
-    rows = [run("recalibration", 0.0, 0.70), run("a", 30.0, 0.90), run("b", 27.0, 0.90)] + [
-        run(REPLICATE, db, 0.72) for db in replicate_bics]
+    rows = [_run("recalibration", 0.0, 0.70), _run("a", 30.0, 0.90), _run("b", 27.0, 0.90)] + [
+        _run(REPLICATE, db, 0.72) for db in replicate_bics]
     floor = _realisation_floor(rows, 0.70)
     assert floor["scatter"] == pytest.approx(float(np.std(replicate_bics, ddof=1)))
     assert _ambiguity_margin(floor) == max(AMBIGUITY_MARGIN, floor["scatter"])
@@ -642,13 +648,9 @@ def test_an_effect_stands_by_its_best_decisive_run():
     failing run and a was named (measured: a Yade 18.45 m floor recording named cohesion)."""
     from crashdem.diagnosis.confirm import REPLICATE, _Confirmation, _FullTier, _realisation_floor
 
-    def run(name, db, score):
-        return {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
-                "delta_bic_vs_reference": db}
-
-    b_likely, b_decisive = run("b", 29.0, 0.70), run("b", 26.0, 0.90)
-    rows = [run("recalibration", 0.0, 0.70), run("a", 30.0, 0.90), b_likely, b_decisive,
-            run(REPLICATE, -10.0, 0.72), run(REPLICATE, 5.0, 0.72)]
+    b_likely, b_decisive = _run("b", 29.0, 0.70), _run("b", 26.0, 0.90)
+    rows = [_run("recalibration", 0.0, 0.70), _run("a", 30.0, 0.90), b_likely, b_decisive,
+            _run(REPLICATE, -10.0, 0.72), _run(REPLICATE, 5.0, 0.72)]
     floor = _realisation_floor(rows, 0.70)
     c = object.__new__(_Confirmation)
     c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
@@ -757,23 +759,16 @@ def test_a_claim_must_also_hold_on_the_search_tier(coarse_level_db, coarse_score
     from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
                                             _realisation_floor, _SearchTier)
 
-    def run(name, db, score, value=None):
-        r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
-             "delta_bic_vs_reference": db}
-        if value is not None:
-            r["search_value"] = value
-        return r
-
-    tier_rows = ([run("baseline", 0.0, 0.691)]
-                 + [run("soil_layering", db, sc, v) for db, sc, v in
+    tier_rows = ([_run("baseline", 0.0, 0.691)]
+                 + [_run("soil_layering", db, sc, v) for db, sc, v in
                     ((-10.3, 0.65, 0.2), (coarse_level_db, coarse_score, 0.3), (-14.2, 0.6, 0.4),
                      (17.2, 0.57, 0.5))]
-                 + [run("boundary_proximity", 50.8, 0.762, 0.7)]
-                 + [run(REPLICATE, db, sc) for db, sc in ((-5.4, 0.52), (14.5, 0.64),
-                                                          (26.2, 0.736), (9.0, 0.69))])
+                 + [_run("boundary_proximity", 50.8, 0.762, 0.7)]
+                 + [_run(REPLICATE, db, sc) for db, sc in ((-5.4, 0.52), (14.5, 0.64),
+                                                           (26.2, 0.736), (9.0, 0.69))])
     tier = _SearchTier(tier_rows, _realisation_floor(tier_rows, 0.691), [], [], {})
-    rows = [run("recalibration", 0.0, 0.691), run("soil_layering", 28.2, 0.766),
-            run("boundary_proximity", 14.7, 0.622, 0.7)]
+    rows = [_run("recalibration", 0.0, 0.691), _run("soil_layering", 28.2, 0.766),
+            _run("boundary_proximity", 14.7, 0.622, 0.7)]
     full = _FullTier(rows, 0.691, _realisation_floor(rows, 0.691))
     c = object.__new__(_Confirmation)
     c.rep = type("R", (), {"missing_physics": "soil_layering", "fit": {}})()
@@ -799,17 +794,10 @@ def test_ranking_follows_the_confirmation(confirmed):
     from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
                                             _realisation_floor)
 
-    def run(name, db, score, value=None):
-        r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
-             "delta_bic_vs_reference": db}
-        if value is not None:
-            r["search_value"] = value
-        return r
-
-    rows = ([run("recalibration", 0.0, 0.80), run("cohesion", -5.0, 0.78),
-             run("boundary_proximity", 40.0, 0.86, 0.7), run("boundary_proximity", 60.0, 0.88, 1.25),
-             run("soil_layering", 12.0, 0.81, 0.3)]
-            + [run(REPLICATE, db, 0.80) for db in (15.0, 3.0)])
+    rows = ([_run("recalibration", 0.0, 0.80), _run("cohesion", -5.0, 0.78),
+             _run("boundary_proximity", 40.0, 0.86, 0.7),
+             _run("boundary_proximity", 60.0, 0.88, 1.25), _run("soil_layering", 12.0, 0.81, 0.3)]
+            + [_run(REPLICATE, db, 0.80) for db in (15.0, 3.0)])
     full = _FullTier(rows, 0.80, _realisation_floor(rows, 0.80))
     screening = ["cohesion", "recalibration", "soil_layering", "boundary_proximity",
                  "structural_crush"]
@@ -824,7 +812,8 @@ def test_ranking_follows_the_confirmation(confirmed):
     by = {h["name"]: h for h in c.rep.hypotheses}
     assert [by[n]["screening_rank"] for n in screening] == [1, 2, 3, 4, 5]
     ev = by["boundary_proximity"]["full_model_evidence"]
-    assert (ev["value"], ev["delta_bic_vs_reference"], ev["delta_bic_vs_floor"]) == (0.7, 40.0, 25.0)
+    assert (ev["value"], ev["delta_bic_vs_reference"], ev["delta_bic_vs_floor"]) == (
+        0.7, 40.0, 25.0)
     assert by["cohesion"]["full_model_evidence"]["delta_bic_vs_floor"] == -20.0
     assert "full_model_evidence" not in by["structural_crush"]
     assert "full_model_evidence" not in by["recalibration"]
@@ -871,22 +860,15 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
     from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
                                             _realisation_floor)
 
-    def run(name, db, score, value=None):
-        r = {"hypothesis": name, "overrides": {}, "rss": 1.0, "score": score,
-             "delta_bic_vs_reference": db}
-        if value is not None:
-            r["search_value"] = value
-        return r
-
     def decide(deepest, floor_score=0.761):
-        rows = ([run("recalibration", 0.0, 0.691), run("soil_layering", 18.0, 0.70)]
-                + [run("soil_layering", db, sc, v) for db, sc, v in
+        rows = ([_run("recalibration", 0.0, 0.691), _run("soil_layering", 18.0, 0.70)]
+                + [_run("soil_layering", db, sc, v) for db, sc, v in
                    ((-4.5, 0.616, 0.2), (12.9, 0.737, 0.3), (38.7, 0.748, 0.4),
                     (deepest, 0.832, 0.5))]
-                + [run("boundary_proximity", db, sc, v) for db, sc, v in
+                + [_run("boundary_proximity", db, sc, v) for db, sc, v in
                    ((21.5, floor_score, 0.6), (14.7, 0.622, 0.7), (6.8, 0.568, 0.8),
                     (-8.8, 0.484, 1.25))]
-                + [run(REPLICATE, db, sc) for db, sc in ((-2.6, 0.595), (12.4, 0.589))])
+                + [_run(REPLICATE, db, sc) for db, sc in ((-2.6, 0.595), (12.4, 0.589))])
         full = _FullTier(rows, 0.691, _realisation_floor(rows, 0.691))
         c = object.__new__(_Confirmation)
         c.rep = type("R", (), {"missing_physics": "soil_layering", "fit": {}})()
