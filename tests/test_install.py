@@ -35,6 +35,11 @@ def test_wheel_contents(wheel):
     assert not any(n.startswith("tests/") for n in names)
     meta = next(n for n in names if n.endswith("entry_points.txt"))
     assert "crashdem = crashdem.cli:main" in zipfile.ZipFile(wheel).read(meta).decode()
+    # the licence as an SPDX expression (PEP 639; the table form is deprecated by setuptools)
+    # and its text shipped with the metadata
+    metadata = zipfile.ZipFile(wheel).read(next(n for n in names if n.endswith("/METADATA")))
+    assert "License-Expression: MIT" in metadata.decode()
+    assert any(n.endswith("/licenses/LICENSE") for n in names)
 
 
 def test_clean_install_imports_our_packages(wheel, tmp_path):

@@ -159,6 +159,18 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         for name, b in (search.get("best") or {}).items():
             lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
                          f"{b['delta_bic_vs_reference']:.1f} |")
+        named = search.get("named")
+        if named and named.get("interval"):
+            par = named["parameter"]
+            iv, unit = named["interval"], named.get("unit", "")
+            ends = [("at or below " if iv["open"][0] else "") + _fmt(iv["low"], 4),
+                    ("at or above " if iv["open"][1] else "") + _fmt(iv["high"], 4)]
+            lines += ["", f"Named: {named['hypothesis']}, {par} = {_fmt(named[par], 4)} {unit}. "
+                      f"Its runs fit within Delta BIC {iv['margin']:.3g} of the best (the "
+                      f"larger of the replicates' and the levels' own scatter: within it two "
+                      f"runs are not told apart) from {ends[0]} to {ends[1]} {unit}: reported as ± "
+                      f"{_fmt(named['uncertainty'], 3)} {unit} (the noise alone: ± "
+                      f"{_fmt(named['noise_uncertainty'], 3)} {unit})."]
         if search.get("verdicts"):
             lines += ["", "| effect (search tier) | promotion to a full run |", "|---|---|"]
             lines += [f"| {n} | {v} |" for n, v in search["verdicts"].items()]

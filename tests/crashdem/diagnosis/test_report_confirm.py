@@ -887,3 +887,87 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
     # recording 12 on the coarse tier: best at rolling resistance 0.2, the fading end)
     c, full, d = decide(74.8, floor_score=0.70)
     assert c.faded_out(full.rows) == {"soil_layering"} and d.confirmed == "soil_layering"
+
+
+def test_realisation_interval_of_a_named_value():
+    """The values of a searched effect that fit within the ambiguity margin of its best run
+    (``_realisation_interval``): linear in the search coordinate between runs, open on a side
+    where the profile never drops below the best minus the margin, and always holding the
+    adopted value. The adopted uncertainty is the larger of the noise's (curvature) and the
+    interval's reach (``_adopt_full_parameters``)."""
+    from crashdem.diagnosis.catalogue import FullSearch
+    from crashdem.diagnosis.confirm import (_adopt_full_parameters, _profile_scatter,
+                                            _realisation_interval)
+
+    deep = FullSearch("floor_depth", "m", ("k",), (0.6, 0.7, 0.8, 0.9, 1.05, 1.25))
+    prof = {0.6: 10.0, 0.7: 30.0, 0.8: 40.0, 0.9: 36.0, 1.05: 20.0, 1.25: 5.0}
+    lv = [{"hypothesis": "b", "search_value": v, "delta_bic_vs_reference": d}
+          for v, d in prof.items()]
+    iv = _realisation_interval(lv, 0.8, 8.0, deep)
+    # threshold 32: between 0.7 (30) and 0.8 (40) at 0.72; between 0.9 (36) and 1.05 (20) at
+    # 0.9 + 4/16 x 0.15 = 0.9375
+    assert iv["low"] == pytest.approx(0.72) and iv["high"] == pytest.approx(0.9375)
+    assert iv["open"] == [False, False] and iv["margin"] == 8.0
+    # a margin larger than every drop: open on both sides, ends at the span's end runs
+    wide = _realisation_interval(lv, 0.8, 50.0, deep)
+    assert (wide["low"], wide["high"], wide["open"]) == (0.6, 1.25, [True, True])
+    # the best at an end of the span: open there
+    edge = _realisation_interval(lv[2:], 0.8, 8.0, deep)
+    assert edge["low"] == 0.8 and edge["open"] == [True, False]
+    # a jagged profile (each level its own packing): a run within the margin beyond a dip
+    # counts, the span of all of them is the interval
+    jag = [dict(r, delta_bic_vs_reference={0.6: 35.0, 0.7: 20.0}.get(r["search_value"],
+                                                                       r["delta_bic_vs_reference"]))
+           for r in lv]
+    assert _realisation_interval(jag, 0.8, 8.0, deep)["low"] == 0.6
+    assert _realisation_interval(jag, 0.8, 8.0, deep)["open"] == [True, False]
+    # an adopted value outside the profile's interval (a full-tier run) widens it
+    assert _realisation_interval(lv, 1.05, 8.0, deep)["high"] == 1.05
+    # log-scaled searches interpolate in log(value)
+    coh = FullSearch("cohesion", "Pa", ("k",), (1e4, 1e5, 1e6), scale="log", fades="low")
+    lvc = [{"hypothesis": "c", "search_value": v, "delta_bic_vs_reference": d}
+           for v, d in ((1e4, 0.0), (1e5, 20.0), (1e6, 0.0))]
+    ivc = _realisation_interval(lvc, 1e5, 10.0, coh)
+    assert ivc["low"] == pytest.approx(10 ** 4.5) and ivc["high"] == pytest.approx(10 ** 5.5)
+    assert _realisation_interval(lv[:1], 0.6, 8.0, deep) is None
+
+    # the adopted uncertainty, on an exact parabola (no scatter of the levels about it):
+    # 40 - 1000 (x - 0.8)^2, curvature 1 / sqrt(500) = 0.0447 m
+    par = [{"hypothesis": "b", "search_value": v,
+            "delta_bic_vs_reference": 40.0 - 1000.0 * (v - 0.8) ** 2} for v in deep.values]
+    assert _profile_scatter(par, deep) == pytest.approx(0.0, abs=1e-9)
+    rep = type("R", (), {})()
+    rep.hypotheses = [{"name": "b", "parameters": {"floor_depth": 0.85},
+                       "uncertainty": {"floor_depth": 0.01}}]
+    rep.fit = {}
+    best = {**par[2], "overrides": {"k": 0.8}, "score": 0.9}
+    # the replicates scatter by 8: the runs within 8 of the best span 0.72-0.88 m, a reach
+    # of 0.08 m beyond the curvature's 0.0447 m
+    _adopt_full_parameters(rep, best, deep, par, {"delta_bic": 0.0, "score": 0.8,
+                                                  "scatter": 8.0})
+    h = rep.hypotheses[0]
+    assert h["parameters"]["floor_depth"] == 0.8
+    assert h["uncertainty"]["floor_depth"] == pytest.approx(0.08)
+    assert h["full_model"]["noise_uncertainty"]["floor_depth"] == pytest.approx(500 ** -0.5)
+    named = rep.fit["full_search"]["named"]
+    assert named["parameter"] == "floor_depth"
+    assert (named["interval"]["low"], named["interval"]["high"]) == (
+        pytest.approx(0.72), pytest.approx(0.88))
+    # with a small scatter the margin is AMBIGUITY_MARGIN (2): 0.78-0.82 m, inside the
+    # curvature's reach, which is then reported
+    _adopt_full_parameters(rep, best, deep, par, {"delta_bic": 0.0, "score": 0.8,
+                                                  "scatter": 0.5})
+    iv2 = rep.fit["full_search"]["named"]["interval"]
+    assert iv2["margin"] == 2.0 and iv2["low"] == pytest.approx(0.78)
+    assert iv2["high"] == pytest.approx(0.82)
+    assert h["uncertainty"]["floor_depth"] == pytest.approx(500 ** -0.5)
+    # levels that scatter about the parabola more than the replicates do set the margin:
+    # the jagged profile's residual standard deviation about its least-squares parabola
+    u = np.array(deep.values)
+    d = np.array([r["delta_bic_vs_reference"] for r in jag])
+    want = math.sqrt(np.sum((d - np.polyval(np.polyfit(u, d, 2), u)) ** 2) / 3)
+    assert _profile_scatter(jag, deep) == pytest.approx(want) and want > 8.0
+    _adopt_full_parameters(rep, {**jag[2], "overrides": {"k": 0.8}, "score": 0.9}, deep, jag,
+                           {"delta_bic": 0.0, "score": 0.8, "scatter": 8.0})
+    assert rep.fit["full_search"]["named"]["interval"]["margin"] == pytest.approx(want)
+    assert _profile_scatter(jag[:3], deep) == 0.0  # fewer than four levels
