@@ -209,7 +209,6 @@ def run_rom(p, dt, n_steps, method):
                 vt_m = vt + h * (g + (c1 - f1) / m_nose)
                 vb_m = vb + h * (g - c1 / m_body)
                 zt_m = zt + h * vt
-                zb_m = zb + h * vb
                 # commit history with the midpoint velocities over the full step
                 f2, fs = _soil_update(zt_m, vt_m, fs, dt, t + h, p)
                 fcr, sp = _crush_update(fcr, sp, vb_m - vt_m, dt, p)
