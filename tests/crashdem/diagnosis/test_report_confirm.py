@@ -971,3 +971,38 @@ def test_realisation_interval_of_a_named_value():
                            {"delta_bic": 0.0, "score": 0.8, "scatter": 8.0})
     assert rep.fit["full_search"]["named"]["interval"]["margin"] == pytest.approx(want)
     assert _profile_scatter(jag[:3], deep) == 0.0  # fewer than four levels
+
+
+def test_a_recording_longer_than_the_simulation_is_compared_where_both_exist(layering_case):
+    """A recording that runs past the end of the baseline simulation is cut there
+    (``_crop_to_simulation``): the simulation has no value after its end, and holding its last
+    sample would judge every run on a made-up tail. Same report as for the recording cut by
+    hand; the report says where it was cut and how much longer a simulation must run. Measured
+    before the cut on a 0.30 s DEM-truth recording against the 0.12 s baseline: floor 12 named
+    at 1.05 m instead of 0.80 m."""
+    from crashdem.signal import Signal
+
+    base = simulate(RomParams())
+    t_end = 0.10
+    short = {k: Signal(s.name, s.t[s.t <= t_end], s.data[s.t <= t_end], s.unit, s.cfc)
+             for k, s in base.items()}
+    rec = layering_case.recording
+    long_rep = diagnose(short, rec)
+    cut = long_rep.fit["cropped_to_simulation"]
+    assert cut is not None
+    assert cut["recording_end_s"] == pytest.approx(max(s.t[-1] for s in rec.values()))
+    assert cut["simulation_short_by_s"] == pytest.approx(
+        cut["recording_end_s"] - cut["compared_until_s"])
+    assert "past the end of the simulation" in long_rep.decision
+    end = cut["compared_until_s"]
+    assert all(s.t[-1] <= end for s in long_rep.recording.values())
+    by_hand = {k: Signal(s.name, s.t[s.t <= end], s.data[s.t <= end], s.unit, s.cfc)
+               for k, s in rec.items()}
+    hand_rep = diagnose(short, by_hand)
+    assert hand_rep.fit["cropped_to_simulation"] is None
+    assert long_rep.missing_physics == hand_rep.missing_physics
+    assert [h["name"] for h in long_rep.hypotheses] == [h["name"] for h in hand_rep.hypotheses]
+    assert long_rep.fit["before"]["overall"] == hand_rep.fit["before"]["overall"]
+    assert long_rep.fit["after"]["overall"] == hand_rep.fit["after"]["overall"]
+    # a recording within the simulation's span (0.15 s) is not touched
+    assert diagnose(base, by_hand).fit["cropped_to_simulation"] is None
