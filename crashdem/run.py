@@ -20,6 +20,7 @@ Impact speed: the body starts ``impactor.gap`` above the highest grain under it 
 """
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
@@ -359,8 +360,51 @@ def share_packings(run_dir: str | os.PathLike, cache: str | os.PathLike) -> None
         pass
 
 
+@contextlib.contextmanager
+def output_lock(path: Path):
+    """Hold ``<path>.lock`` (an exclusive ``flock``) while a run writes ``path``: a second run
+    writing the same file -- two commands given the same output directory -- is refused with
+    a ``ScenarioError`` instead of both writing it (HDF5 then reports "addr overflow" in one
+    and the other's file is garbage). The lock goes with the process, so a killed run leaves
+    none behind; the lock file is removed when the run ends. Without ``fcntl`` (Windows) there
+    is no lock."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not on Linux/macOS
+        yield
+        return
+    lock = Path(f"{path}.lock")
+    fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise ScenarioError(
+                f"{path}: another run is writing this file now (lock {lock} held); give this "
+                "one another output directory or scenario.name, or wait for it") from None
+        try:
+            yield
+        finally:
+            try:
+                lock.unlink()
+            except OSError:
+                pass
+    finally:
+        os.close(fd)
+
+
 def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
                  resume: bool = False, plots: bool | None = None) -> Path:
+    """Run a scenario end to end and return the HDF5 result path (see ``_run_scenario``); the
+    result file is locked for the run (``output_lock``)."""
+    path = default_output(scen, out_dir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with output_lock(path):
+        return _run_scenario(scen, out_dir, progress, resume, plots)
+
+
+def _run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
+                  resume: bool = False, plots: bool | None = None) -> Path:
     """Run a scenario end to end and return the HDF5 result path.
 
     Parameters

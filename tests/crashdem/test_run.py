@@ -88,3 +88,33 @@ def test_cli_bad_field_exits_2(capsys):
     assert rc == 2
     err = capsys.readouterr().err
     assert "soil.material.young" in err and "-1" in err
+
+
+def test_a_second_run_into_the_same_file_is_refused(tiny_result, tmp_path):
+    """While a run writes its result, another run of the same file (two commands given the same
+    output directory) is refused naming the file and its lock, before it builds anything; the
+    lock goes when its holder ends (here: the holder closes it), and a finished run leaves no
+    lock file behind. Measured before the lock: two `crashdem diagnose` into one --out crashed
+    one of them in HDF5 ("addr overflow") while both wrote the same search-run file."""
+    import fcntl
+    import os
+
+    from crashdem.run import output_lock
+    from crashdem.scenario import ScenarioError
+
+    assert not Path(f"{tiny_result}.lock").exists()
+    scen = sc.load(ROOT / "validation/scenarios/drop_s2_h5p00.toml", TINY)
+    path = tmp_path / "tiny_drop.h5"
+    fd = os.open(f"{path}.lock", os.O_RDWR | os.O_CREAT)  # another process's hold
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    try:
+        with pytest.raises(ScenarioError, match="another run is writing this file"):
+            run_scenario(scen, out_dir=tmp_path, progress=False)
+        assert not path.exists()
+    finally:
+        os.close(fd)
+    with output_lock(path):  # free again once the holder is gone
+        with pytest.raises(ScenarioError, match=r"tiny_drop\.h5\.lock"):
+            with output_lock(path):
+                pass
+    assert not Path(f"{path}.lock").exists()
