@@ -162,15 +162,18 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         named = search.get("named")
         if named and named.get("interval"):
             par = named["parameter"]
-            iv, unit = named["interval"], named.get("unit", "")
-            ends = [("at or below " if iv["open"][0] else "") + _fmt(iv["low"], 4),
-                    ("at or above " if iv["open"][1] else "") + _fmt(iv["high"], 4)]
-            lines += ["", f"Named: {named['hypothesis']}, {par} = {_fmt(named[par], 4)} {unit}. "
-                      f"Its runs fit within Delta BIC {iv['margin']:.3g} of the best (the "
-                      f"larger of the replicates' and the levels' own scatter: within it two "
-                      f"runs are not told apart) from {ends[0]} to {ends[1]} {unit}: reported as ± "
-                      f"{_fmt(named['uncertainty'], 3)} {unit} (the noise alone: ± "
-                      f"{_fmt(named['noise_uncertainty'], 3)} {unit})."]
+            iv = named["interval"]
+            u = named.get("unit", "")
+            u = "" if u in ("", "1", "-") else f" {u}"
+            ends = [n for n, o in zip(("lower", "upper"), iv["open"]) if o]
+            open_txt = (f"; the {' and '.join(ends)} end{'s are' if len(ends) > 1 else ' is'} "
+                        f"the searched span's, so not bounded there" if ends else "")
+            lines += ["", f"Named: {named['hypothesis']}, {par} = {_fmt(named[par], 4)}{u}. "
+                      f"The runs within Delta BIC {iv['margin']:.3g} of the best (the larger of "
+                      f"the replicates' and the levels' own scatter: within it two runs are not "
+                      f"told apart) span {_fmt(iv['low'], 4)} to {_fmt(iv['high'], 4)}{u}"
+                      f"{open_txt}: reported as ± {_fmt(named['uncertainty'], 3)}{u} (the noise "
+                      f"alone: ± {_fmt(named['noise_uncertainty'], 3)}{u})."]
         if search.get("verdicts"):
             lines += ["", "| effect (search tier) | promotion to a full run |", "|---|---|"]
             lines += [f"| {n} | {v} |" for n, v in search["verdicts"].items()]
