@@ -361,7 +361,7 @@ def share_packings(run_dir: str | os.PathLike, cache: str | os.PathLike) -> None
 
 
 @contextlib.contextmanager
-def output_lock(path: Path):
+def output_lock(path: Path, what: str = "another run is writing this file now"):
     """Hold ``<path>.lock`` (an exclusive ``flock``) while a run writes ``path``: a second run
     writing the same file -- two commands given the same output directory -- is refused with
     a ``ScenarioError`` instead of both writing it (HDF5 then reports "addr overflow" in one
@@ -380,8 +380,8 @@ def output_lock(path: Path):
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             raise ScenarioError(
-                f"{path}: another run is writing this file now (lock {lock} held); give this "
-                "one another output directory or scenario.name, or wait for it") from None
+                f"{path}: {what} (lock {lock} held); give this one another output directory "
+                "or scenario.name, or wait for it") from None
         try:
             yield
         finally:

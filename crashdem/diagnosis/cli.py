@@ -285,7 +285,18 @@ def _channel_map(specs: list[str] | None, rec: dict[str, Signal],
 
 
 def diagnose_command(args: argparse.Namespace) -> int:
-    """Entry point used by ``crashdem.cli`` (``crashdem diagnose ...``)."""
+    """Entry point used by ``crashdem.cli`` (``crashdem diagnose ...``): one diagnosis at a
+    time per output directory (``DIR/report.lock``, ``crashdem.run.output_lock``; its runs
+    write fixed file names there)."""
+    from crashdem.run import output_lock
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with output_lock(out / "report", "another diagnosis is writing into this directory now"):
+        return _diagnose_command(args)
+
+
+def _diagnose_command(args: argparse.Namespace) -> int:
     from crashdem import scenario as sc
     from crashdem.diagnosis import diagnose, screen_then_confirm, working_rate, write_report
     from crashdem.recordings import read_recording

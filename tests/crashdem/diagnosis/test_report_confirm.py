@@ -350,6 +350,31 @@ def test_cli_diagnose_end_to_end(tmp_path):
     assert (tmp_path / "out" / "overlay_accel_z.png").exists()
 
 
+def test_cli_diagnose_refuses_a_directory_another_diagnosis_writes(tmp_path, capsys):
+    """Two ``crashdem diagnose`` into one ``--out``: their runs write fixed file names there, so
+    the second is refused at once (``DIR/report.lock``), naming the directory, and writes
+    nothing; once the first is gone the directory is free again."""
+    import fcntl
+    import os
+
+    rec_path = tmp_path / "missing.csv"  # never read while the directory is taken
+    (tmp_path / "out").mkdir()
+    fd = os.open(tmp_path / "out" / "report.lock", os.O_RDWR | os.O_CREAT)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # a diagnosis running there
+    try:
+        rc, d = _cli_rom_diagnose(tmp_path, rec_path)
+    finally:
+        os.close(fd)
+    assert rc == 2 and d is None
+    err = capsys.readouterr().err
+    assert "another diagnosis is writing into this directory now" in err and "report.lock" in err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["report.lock"]
+    rc, _ = _cli_rom_diagnose(tmp_path, rec_path)  # free: now it fails on the recording itself
+    err = capsys.readouterr().err
+    assert rc == 2 and "another diagnosis" not in err and "missing.csv" in err
+    assert not (tmp_path / "out" / "report.lock").exists()
+
+
 def test_cli_rom_baseline_filter_class(tmp_path):
     """``crashdem diagnose --baseline rom`` on a CSV recording filtered at CFC 180 that does not
     say so: the class is measured and the ROM baseline is compared at it (its raw channels are
