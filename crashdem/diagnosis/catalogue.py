@@ -383,7 +383,7 @@ class FullSearch:
 #: recordings and 2 others were named wrongly, against 0 and 1 with deposited beds)
 DROP_FULL_SEARCH: dict[str, FullSearch] = {
     "soil_layering": FullSearch(
-        "interface_depth", "m", ("physics.soil_layering.depth",), (0.2, 0.3, 0.4, 0.5),
+        "interface_depth", "m", ("physics.soil_layering.depth",), (0.15, 0.2, 0.3, 0.4, 0.5),
         {"physics.soil_layering.enabled": True, "physics.soil_layering.lower_young_factor": 5.0}),
     "boundary_proximity": FullSearch(
         "floor_depth", "m", ("physics.boundary_proximity.floor_depth",),

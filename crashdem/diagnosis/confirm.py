@@ -999,8 +999,8 @@ def _profile_scatter(levels: list[dict[str, Any]], fs: catalogue.FullSearch) -> 
     four levels). Each level is its own packing of the bed, and where runs fit well one packing's
     grains count more than where they all fit badly (the replicates of the baseline): measured
     on DEM truth layering 11 at eight depths of 0.15-0.40 m, the levels scatter by 24 about the
-    parabola, the replicates by 3.7; the four catalogue levels of the DEM-truth layering and
-    floor cases by 0.8-17."""
+    parabola, the replicates by 3.7; the catalogue levels of the DEM-truth layering and floor
+    cases by 4.7-25."""
     pts = [(fs.coord(float(r["search_value"])), float(r["delta_bic_vs_reference"]))
            for r in levels if math.isfinite(float(r["delta_bic_vs_reference"]))]
     if len(pts) < 4:

@@ -13,7 +13,7 @@ baseline numerics; the layering and floor levels deposit their own beds once).
 The diagnosis is the full method: ROM screening calibrated to (and anchored on) the baseline
 simulation, then ``screen_then_confirm`` with the real DEM (``generator_dem.DemFullSimulator``)
 for the top ``TOP_K`` candidates and the full-model search over the soil effects
-(``catalogue.DROP_FULL_SEARCH``: 22 levels plus one refinement run), judged against the
+(``catalogue.DROP_FULL_SEARCH``: 23 levels plus one refinement run), judged against the
 realisation floor of 4 replicate packings of the baseline (``generator_dem.replicates``).
 
 Status (measured, see docs/diagnosis.md "Validation on DEM truth"): the null cases claim no
@@ -55,8 +55,8 @@ TOP_K = 2
 GAP = ("DEM truth, measured with the full-model search (2026-11-22, session 7): 10/12 effect "
        "cases named, no wrong name, cohesion 0/2 (seed 11: contact damping and cohesion fit "
        "no better than a replicate packing of the baseline, Delta BIC 18.9 / 18.3 against 28.8; "
-       "seed 12 below the null level); layering depth 28-30 % short (about one grain radius "
-       "at r = 0.10 m), floor depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
+       "seed 12 below the null level); layering depth 13 / 30 % short (0.234 / 0.20 m with the "
+       "0.15 m level of session 12; before 26-30 %, about one grain radius at r = 0.10 m), floor depth +1.6 % (seed 12) and +36 % (seed 11, the truth's grains 10-15 % off); final "
        "scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same physics "
        "score against each other; the same with the realisation floor of 4 replicate packings "
        "(session 8); the concealed cohesions (1.2-1.3e5 Pa) move the model less than another "
@@ -223,7 +223,7 @@ def test_named_search_value_uncertainty_counts_the_packing(dem_runs, tmp_path):
     (the profile's curvature) and the realisation interval's reach: every run within the
     replicates' (or the levels' own) Delta BIC scatter of the best. On the DEM-truth depths
     (layering, floor) the truth lies fewer of these uncertainties from the named value than of
-    the noise's (measured RMS 3.06 -> 1.74 over the four); ``report.md`` states the interval."""
+    the noise's (measured RMS 3.41 -> 1.64 over the four); ``report.md`` states the interval."""
     from crashdem.diagnosis import write_report
 
     z_noise, z_now = [], []

@@ -109,10 +109,10 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
 
 def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     """With the full-model search, the full model also runs each searched effect at each of its
-    levels (``catalogue.DROP_FULL_SEARCH``: 22) and at most one refinement; every level is
+    levels (``catalogue.DROP_FULL_SEARCH``: 23) and at most one refinement; every level is
     reported with its score and Delta BIC (report.json) and each effect's best level in
     report.md, each effect is judged by its best run, and the concealed layering is named (its
-    interface 0.2-0.5 m levels bracket the truth)."""
+    interface 0.15-0.5 m levels bracket the truth)."""
     from crashdem.diagnosis.catalogue import DROP
 
     calls: list = []
@@ -120,7 +120,7 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     top_k = 2
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
     n_levels = sum(len(fs.values) for fs in DROP.full_search.values())
-    assert n_levels == 22
+    assert n_levels == 23
     assert 1 + top_k + n_levels <= len(calls) == rep.simulations["full_simulations"] \
         <= 1 + top_k + n_levels + 1
     levels = rep.fit["full_search"]["levels"]
