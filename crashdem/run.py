@@ -395,16 +395,6 @@ def output_lock(path: Path, what: str = "another run is writing this file now"):
 
 def run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
                  resume: bool = False, plots: bool | None = None) -> Path:
-    """Run a scenario end to end and return the HDF5 result path (see ``_run_scenario``); the
-    result file is locked for the run (``output_lock``)."""
-    path = default_output(scen, out_dir)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with output_lock(path):
-        return _run_scenario(scen, out_dir, progress, resume, plots)
-
-
-def _run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, progress: bool = True,
-                  resume: bool = False, plots: bool | None = None) -> Path:
     """Run a scenario end to end and return the HDF5 result path.
 
     Parameters
@@ -421,14 +411,23 @@ def _run_scenario(scen: Scenario, out_dir: str | os.PathLike | None = None, prog
     With ``output.checkpoint_every_s`` set, a checkpoint (``crashdem.checkpoint``) is written
     at the first exchange at or after every multiple of that simulated-time interval that
     follows an energy-ledger refresh (so that the resumed ledger cadence is the same), and a
-    final one (``complete=True``) at the end; see ``docs/restart.md``.
+    final one (``complete=True``) at the end; see ``docs/restart.md``. The result file is
+    locked for the run (``output_lock``): a second run of the same file is refused.
     """
+    path = default_output(scen, out_dir)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with output_lock(path):
+        return _run_scenario(scen, path, progress, resume, plots)
+
+
+def _run_scenario(scen: Scenario, path: Path, progress: bool, resume: bool,
+                  plots: bool | None) -> Path:
+    """``run_scenario`` writing the result file ``path`` (its directory exists, its lock is
+    held)."""
     from crashdem import checkpoint as ck
     from crashdem.progress import Progress
     from crashdem.results import ResultWriter
 
-    path = default_output(scen, out_dir)
-    path.parent.mkdir(parents=True, exist_ok=True)
     ckpt_path = ck.checkpoint_path(path)
     every = scen["output.checkpoint_every_s"]
     saved = None

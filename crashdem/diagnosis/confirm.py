@@ -963,6 +963,14 @@ def _search_vertex(best: dict[str, Any], rows: list[dict[str, Any]],
     return {"value": fs.value(float(np.clip(-a1 / (2.0 * a2), u[0], u[2])))}
 
 
+def _profile(runs: Iterable[dict[str, Any]], fs: catalogue.FullSearch
+             ) -> list[tuple[float, float]]:
+    """``(search coordinate, Delta BIC)`` of the search runs with a finite Delta BIC, by
+    coordinate."""
+    return sorted((fs.coord(float(r["search_value"])), float(r["delta_bic_vs_reference"]))
+                  for r in runs if math.isfinite(float(r["delta_bic_vs_reference"])))
+
+
 def _realisation_interval(lv: list[dict[str, Any]], x: float, margin: float,
                           fs: catalogue.FullSearch) -> dict[str, Any] | None:
     """The values of a searched effect that fit within ``margin`` (Delta BIC) of its best run.
@@ -974,8 +982,7 @@ def _realisation_interval(lv: list[dict[str, Any]], x: float, margin: float,
     that is *open*: it ends at the span's end run (the search bounds nothing beyond it). The
     interval always holds ``x``, the adopted value. ``{"low", "high", "open": [low open, high
     open], "margin"}``, or None with fewer than two runs."""
-    pts = sorted((fs.coord(float(r["search_value"])), float(r["delta_bic_vs_reference"]))
-                 for r in lv if math.isfinite(float(r["delta_bic_vs_reference"])))
+    pts = _profile(lv, fs)
     if len(pts) < 2:
         return None
     thr = max(d for _, d in pts) - margin
@@ -1001,8 +1008,7 @@ def _profile_scatter(levels: list[dict[str, Any]], fs: catalogue.FullSearch) -> 
     on DEM truth layering 11 at eight depths of 0.15-0.40 m, the levels scatter by 24 about the
     parabola, the replicates by 3.7; the catalogue levels of the DEM-truth layering and floor
     cases by 4.7-25."""
-    pts = [(fs.coord(float(r["search_value"])), float(r["delta_bic_vs_reference"]))
-           for r in levels if math.isfinite(float(r["delta_bic_vs_reference"]))]
+    pts = _profile(levels, fs)
     if len(pts) < 4:
         return 0.0
     u, d = np.array(pts).T
