@@ -140,6 +140,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "on the simulator the search runs on; an effect must fit the recording "
                         "better than every one of them (the realisation floor; default 4 with "
                         "the full-model search, 0 = none)")
+    d.add_argument("--numerics-check", default=None, metavar="F[,F...]|off",
+                   help="rerun a named soil effect's search levels with the grain radius times "
+                        "each factor and widen its uncertainty to how far the value moves "
+                        "(default 0.9,1.1; off = none)")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

@@ -365,7 +365,9 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
-                                  search_simulator=search_sim, replicates=reps, **cat_kw)
+                                  search_simulator=search_sim, replicates=reps,
+                                  numerics=_numerics_scales(getattr(args, "numerics_check", None)),
+                                  **cat_kw)
         rep.simulations["full_search"] = search_how
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
@@ -403,6 +405,27 @@ def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
     from crashdem.diagnosis import replicate_overrides
 
     return replicate_overrides(scen.get("scenario.seed"), n)
+
+
+def _numerics_scales(text: str | None) -> tuple[float, ...]:
+    """``--numerics-check``: the grain-radius factors of the numerics check of a named value
+    (default ``confirm.NUMERICS_RADIUS_SCALES``; ``off`` = none)."""
+    from crashdem.diagnosis.confirm import NUMERICS_RADIUS_SCALES
+
+    if text is None:
+        return tuple(NUMERICS_RADIUS_SCALES)
+    if text.strip().lower() in ("off", "none", ""):
+        return ()
+    try:
+        out = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--numerics-check={text!r}: must be comma-separated grain-radius "
+                         f"factors in [0.5, 2] (e.g. 0.9,1.1) or off") from None
+    bad = [f for f in out if not 0.5 <= f <= 2.0]
+    if bad:
+        raise ValueError(f"--numerics-check={text!r}: factor {bad[0]:g} is outside [0.5, 2] "
+                         f"(a factor on the scenario's grain radius)")
+    return out
 
 
 #: the coarse resolution of the full-model search (validation/campaign/studies.py "small":

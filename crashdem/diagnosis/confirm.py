@@ -32,12 +32,14 @@ from crashdem.diagnosis import (FILTER_CLASS_VARIANT, SPEED_OFFSET_SIGMAS, Repor
                                 _at_off, _remaining_mismatch, _si, _speed_found,
                                 catalogue, diagnose)
 from crashdem.diagnosis.catalogue import RECALIBRATION
+from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
 from crashdem.diagnosis.mismatch import align, onset_time
 from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
-           "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides"]
+           "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
+           "NUMERICS_RADIUS_SCALES"]
 
 #: a full simulation must raise the overall score over the baseline by this much to confirm
 CONFIRM_MIN_GAIN = 0.02
@@ -69,6 +71,13 @@ REALISATION_MARGIN = 0.0
 #: model's realisation scatter (the screening names it by the same rule)
 SPEED_CHECK_SIGMAS = SPEED_OFFSET_SIGMAS
 
+#: the numerics check of a named searched value: its search levels run again with the grain
+#: radius times each of these factors (on the simulator the search ran on), and the value
+#: each profile locates is compared with the one at the simulation's own grains. A recording
+#: comes from a soil whose grains the model's coarse-grained ones stand for only to about
+#: ten per cent, and from another code; the realisation interval samples packings only.
+NUMERICS_RADIUS_SCALES = (0.9, 1.1)
+
 Row = dict[str, Any]
 Request = tuple[str, dict[str, Any], "float | None"]
 
@@ -85,6 +94,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         full_search: bool | Mapping[str, catalogue.FullSearch] = True,
                         search_simulator: Simulator | None = None,
                         replicates: Sequence[Mapping[str, Any]] = (),
+                        numerics: Sequence[float] = NUMERICS_RADIUS_SCALES,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -117,6 +127,11 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         ``SPEED_CHECK_SIGMAS``) stands without it. On the
         search simulator the floor applies to the promotion of its levels (the full model's
         resolution has its own scatter)
+    numerics : grain-radius factors of the numerics check of a named searched value
+        (``NUMERICS_RADIUS_SCALES``; ``()`` skips it): the named effect's search levels run
+        again at each (on the simulator the search ran on), and the reported uncertainty is at
+        least how far the value each profile locates lies from the one at the simulation's own
+        grains (``hypotheses[*].full_model.numerics``, ``fit.full_search.named.numerics``)
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -147,6 +162,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     t_full = time.perf_counter() - t_full
     d = c.decide(full, tier)
     c.record(full, tier, d, t_full)
+    if numerics:
+        c.numerics_check(search_simulator if tier is not None else full_simulator,
+                         tier, full, d, numerics)
     return rep
 
 
@@ -635,6 +653,68 @@ class _Confirmation:
         rep.decision += "; " + self.sentence(full, tier, d)
         self.rerank(full, tier, d)
 
+    def numerics_check(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
+                       d: _Decision, scales: Sequence[float]) -> None:
+        """How far the value of a named searched effect moves with the grain size: its search
+        levels run again on ``sim`` (the simulator the search ran on) with the grain radius
+        times each factor of ``scales`` (on a search tier each with its own baseline run, on
+        which they are anchored as the search's levels are), and each profile's optimum
+        (``_profile_optimum``) is compared with that of the levels at the simulation's own
+        grains. The largest distance is the numerics uncertainty; the reported uncertainty is
+        at least it. Nothing is decided on these runs."""
+        name = d.confirmed
+        if name is None or name not in self.searched or "search_value" not in d.best:
+            return
+        fs, rep = self.searched[name], self.rep
+        h = next((h for h in rep.hypotheses if h["name"] == name), None)
+        if h is None or "full_model" not in h:
+            return
+        t0 = time.perf_counter()
+        req: list[Request] = []
+        for f in scales:
+            num = {RADIUS_SCALE_KEY: float(f)}
+            if tier is not None:
+                req.append(("baseline", {**self.cfc_key, **num}, None))
+            req += [(name, {**fs.overrides(x), **self.cfc_key, **num}, float(x))
+                    for x in fs.values]
+        rows = self.run(sim, req)
+        base_bic = self.bic(_full_rss(rep, rep.baseline), 0)
+        per: list[dict[str, Any]] = []
+        for f in scales:
+            mine = [r for r in rows if r["overrides"].get(RADIUS_SCALE_KEY) == float(f)]
+            ref = next((r for r in mine if r["hypothesis"] == "baseline"), None)
+            lv = [r for r in mine if "search_value" in r]
+            if ref is not None:
+                lv = [self.anchored(r, ref) for r in lv]
+            for r in lv:
+                if "rss" in r:
+                    r["delta_bic_vs_reference"] = base_bic - self.bic(r["rss"], 1)
+            u = _profile_optimum(lv, fs)
+            per.append({"radius_scale": float(f), "value": None if u is None else fs.value(u),
+                        "runs": len(mine), "failed": sum("rss" not in r for r in mine)})
+        own = _profile_optimum([r for r in _scored_levels(tier.rows if tier is not None
+                                                          else full.rows)
+                                if r["hypothesis"] == name], fs)
+        x = float(d.best["search_value"])
+        shifts = [abs(p["value"] - fs.value(own)) if fs.scale != "log" else
+                  abs(fs.coord(p["value"]) - own) * x
+                  for p in per if p["value"] is not None and own is not None]
+        sd = max(shifts) if shifts else None
+        check = {"radius_scales": [float(f) for f in scales], "values": per,
+                 "own_value": None if own is None else fs.value(own), "uncertainty": sd,
+                 "runs": len(rows), "wall_time_s": time.perf_counter() - t0}
+        p = fs.parameter
+        fm = h["full_model"]
+        fm["numerics"] = {p: check}
+        named = rep.fit["full_search"]["named"]
+        named["numerics"] = check
+        if sd is not None and sd > fm["uncertainty"][p]:
+            fm["uncertainty"][p] = sd
+            named["uncertainty"] = sd
+            if isinstance(h.get("uncertainty"), dict) and p in h["uncertainty"]:
+                h["uncertainty"] = {**h["uncertainty"], p: sd}
+        rep.simulations["numerics_simulations"] = len(rows)
+
     def settle(self, d: _Decision) -> None:
         """Make the report's best explanation, "after" fit, refitted signals and remaining
         mismatch those of the confirmation's answer, not of the screening's choice: the named
@@ -969,6 +1049,25 @@ def _profile(runs: Iterable[dict[str, Any]], fs: catalogue.FullSearch
     coordinate."""
     return sorted((fs.coord(float(r["search_value"])), float(r["delta_bic_vs_reference"]))
                   for r in runs if math.isfinite(float(r["delta_bic_vs_reference"])))
+
+
+def _profile_optimum(levels: Iterable[dict[str, Any]], fs: catalogue.FullSearch
+                     ) -> float | None:
+    """The search coordinate a profile of search levels (one effect, refinements aside)
+    locates: the vertex of the parabola through its best level and the two neighbours when
+    that level is interior and the parabola opens downwards (within the neighbours, as the
+    refinement's ``_search_vertex``), else the best level; None without a scored level."""
+    lv = sorted((r for r in levels if not r.get("refined") and "delta_bic_vs_reference" in r
+                 and math.isfinite(float(r["delta_bic_vs_reference"]))),
+                key=lambda r: r["search_value"])
+    if not lv:
+        return None
+    i = max(range(len(lv)), key=lambda j: lv[j]["delta_bic_vs_reference"])
+    par = _parabola(lv, i, fs)
+    if par is None or not par[1] < 0.0:
+        return fs.coord(float(lv[i]["search_value"]))
+    u, a2, a1 = par
+    return float(np.clip(-a1 / (2.0 * a2), u[0], u[2]))
 
 
 def _realisation_interval(lv: list[dict[str, Any]], x: float, margin: float,

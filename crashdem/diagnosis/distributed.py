@@ -36,7 +36,11 @@ from typing import Any, Callable, Mapping, Sequence
 from crashdem.signal import Signal
 
 __all__ = ["DaskFullSimulator", "distributed_confirm", "full_simulator_from_args",
-           "scenario_overrides"]
+           "scenario_overrides", "RADIUS_SCALE_KEY"]
+
+#: override key of a run with the scenario's grain radius times this factor (not a scenario
+#: field: ``scenario_overrides`` makes it ``soil.radius``)
+RADIUS_SCALE_KEY = "numerics.radius_scale"
 
 
 def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -50,12 +54,20 @@ def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str,
     compacted layer at 1 m) ends the soil column before the interface, so the lower layer is
     not there: the run gets ``physics.soil_layering.enabled = false`` unless the overrides set
     the layering themselves (before, such a floor was refused by the scenario check and every
-    floor above 1 m went unsearched).
+    floor above 1 m went unsearched). ``numerics.radius_scale`` (``confirm.NUMERICS_KEY``: the
+    numerics check of a named value) multiplies the scenario's grain radius.
     """
     from crashdem.diagnosis.cli import _apply_scales
 
     scales = {k: v for k, v in overrides.items() if k.startswith("calibration.")}
-    keys = {k: v for k, v in overrides.items() if not k.startswith("calibration.")}
+    keys = {k: v for k, v in overrides.items()
+            if not k.startswith("calibration.") and k != RADIUS_SCALE_KEY}
+    if RADIUS_SCALE_KEY in overrides:
+        f = float(overrides[RADIUS_SCALE_KEY])
+        if not 0.5 <= f <= 2.0:
+            raise ValueError(f"{RADIUS_SCALE_KEY}={f!r}: must be in [0.5, 2] (a factor on the "
+                             f"scenario's grain radius)")
+        keys["soil.radius"] = float(keys.get("soil.radius", scenario.get("soil.radius"))) * f
 
     def get(key: str) -> Any:
         return keys[key] if key in keys else scenario.get(key)

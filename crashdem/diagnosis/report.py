@@ -173,7 +173,19 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                       f"the replicates' and the levels' own scatter: within it two runs are not "
                       f"told apart) span {_fmt(iv['low'], 4)} to {_fmt(iv['high'], 4)}{u}"
                       f"{open_txt}: reported as ± {_fmt(named['uncertainty'], 3)}{u} (the noise "
-                      f"alone: ± {_fmt(named['noise_uncertainty'], 3)}{u})."]
+                      f"alone: ± {_fmt(named['noise_uncertainty'], 3)}{u}; the larger of these "
+                      f"and the numerics check below)."]
+            num = named.get("numerics")
+            if num:
+                vals = "; ".join(f"x{p['radius_scale']:g}: {_fmt(p['value'], 4)}{u}"
+                                 if p.get("value") is not None else
+                                 f"x{p['radius_scale']:g}: no run scored"
+                                 for p in num["values"])
+                lines += ["", f"Numerics check ({num['runs']} runs): the {named['hypothesis']} "
+                          f"levels with the grain radius scaled locate {par} at {vals}, against "
+                          f"{_fmt(num.get('own_value'), 4)}{u} with the simulation's own grains"
+                          + (f" (± {_fmt(num['uncertainty'], 3)}{u})"
+                             if num.get("uncertainty") is not None else "") + "."]
         if search.get("verdicts"):
             lines += ["", "| effect (search tier) | promotion to a full run |", "|---|---|"]
             lines += [f"| {n} | {v} |" for n, v in search["verdicts"].items()]

@@ -82,19 +82,28 @@ def _cli_rom_diagnose(tmp_path, rec_path, *extra: str) -> tuple[int, dict | None
     return rc, (json.loads(rep.read_text()) if rc == 0 and rep.exists() else None)
 
 
-def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=()):
+def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=(),
+                            grain_interface=False):
     """A stand-in for the full model: the ROM driven through *scenario keys*
     (``rom_from_scenario``, truth numerics, no noise); the overrides of every call are
     appended to ``calls``. With ``recording``, runs switching on an effect named in
     ``same_as_recording`` return the recording itself (two effects that fit equally), and so
-    does a replicate (``scenario.seed`` set) when ``"replicate"`` is among them."""
+    does a replicate (``scenario.seed`` set) when ``"replicate"`` is among them. The ROM has no
+    grains: a grain-radius factor (the numerics check) changes nothing, unless
+    ``grain_interface``: then the layer interface acts at its depth divided by the factor (as
+    if the interface were felt through a grain-size-dependent number of grain layers)."""
     scenario = pytest.importorskip("crashdem.scenario")
     from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
 
     base_scen = scenario.loads(SCENARIO_TOML)
 
     def full(overrides):
         calls.append(dict(overrides))
+        overrides = dict(overrides)
+        f = float(overrides.pop(RADIUS_SCALE_KEY, 1.0))
+        if grain_interface and "physics.soil_layering.depth" in overrides:
+            overrides["physics.soil_layering.depth"] = overrides["physics.soil_layering.depth"] / f
         if any(overrides.get(f"physics.{e}.enabled") for e in same_as_recording) or (
                 "replicate" in same_as_recording and "scenario.seed" in overrides):
             return dict(recording)
@@ -121,7 +130,11 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
     n_levels = sum(len(fs.values) for fs in DROP.full_search.values())
     assert n_levels == 23
-    assert 1 + top_k + n_levels <= len(calls) == rep.simulations["full_simulations"] \
+    # the numerics check runs the named effect's levels twice when a search level stands for it
+    n_num = rep.simulations.get("numerics_simulations", 0)
+    assert n_num == (2 * len(DROP.full_search["soil_layering"].values)
+                     if rep.fit["full_search"].get("named") else 0)
+    assert 1 + top_k + n_levels <= len(calls) - n_num == rep.simulations["full_simulations"] \
         <= 1 + top_k + n_levels + 1
     levels = rep.fit["full_search"]["levels"]
     assert len(levels) >= n_levels
@@ -136,6 +149,59 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
         assert f"| {name} |" in text
 
 
+def test_numerics_check_widens_a_named_value_by_its_grain_size_shift(tmp_path):
+    """The numerics check reruns the named effect's levels with the grain radius x0.9 and x1.1.
+    The recording: the search's own layering form (interface 0.33 m) in the stand-in model;
+    only the search runs (top_k = 0), so a search level stands for the named effect.
+    Where the located value moves with the grains (here the interface acts at its depth over
+    the factor, so the profile's optimum moves by about the factor), the values it reports are
+    ordered with the factor, the shift is about a tenth of the depth, the reported uncertainty
+    is at least the shift and report.md says so. Where nothing moves (the stand-in has no
+    grains), every value equals the one at the own grains and the uncertainty is the one
+    without the check."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    fs = {"soil_layering": DROP.full_search["soil_layering"]}
+    truth = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(
+        fs["soil_layering"].overrides(0.33)))
+    recording = acquire(truth, np.random.default_rng(5))
+
+    def run(grain_interface, numerics=(0.9, 1.1)):
+        return screen_then_confirm(simulate(RomParams()), recording,
+                                   _scenario_rom_simulator([], grain_interface=grain_interface),
+                                   top_k=0, full_search=fs, numerics=numerics)
+
+    moved = run(True)
+    assert moved.missing_physics == "soil_layering", moved.decision
+    named = moved.fit["full_search"]["named"]
+    num = named["numerics"]
+    own = num["own_value"]
+    assert abs(own - 0.33) < 0.03, num
+    v09, v11 = (p["value"] for p in num["values"])
+    assert v09 < own < v11, num
+    # the optimum moves by about 0.1 x 0.33 m each way; the profile locates it from levels
+    # 0.1 m apart (a parabola through three of them), so to within that spacing
+    assert 0.02 < num["uncertainty"] <= 0.1, num
+    assert named["uncertainty"] >= num["uncertainty"]
+    h = next(h for h in moved.hypotheses if h["name"] == "soil_layering")
+    assert h["full_model"]["uncertainty"]["interface_depth"] == named["uncertainty"]
+    assert moved.simulations["numerics_simulations"] == 2 * len(fs["soil_layering"].values)
+    write_report(moved, tmp_path, plots=False)
+    assert "Numerics check (10 runs)" in (tmp_path / "report.md").read_text()
+
+    still, off = run(False), run(False, numerics=())
+    num = still.fit["full_search"]["named"]["numerics"]
+    # the same runs; Delta BIC against another constant, so equal to rounding
+    assert [p["value"] for p in num["values"]] == pytest.approx([num["own_value"]] * 2, rel=1e-12)
+    assert num["uncertainty"] < 1e-12
+    assert still.fit["full_search"]["named"]["uncertainty"] \
+        == off.fit["full_search"]["named"]["uncertainty"]
+    assert "numerics" not in off.fit["full_search"]["named"]
+    assert "numerics_simulations" not in off.simulations
+
+
 def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
     """With a separate (cheaper) search simulator the levels run there (plus its baseline run
     and at most one refinement) and only the leading effects' best levels reach the full
@@ -147,7 +213,11 @@ def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering
                               _scenario_rom_simulator(full_calls), top_k=top_k,
                               search_simulator=_scenario_rom_simulator(search_calls))
     assert len(full_calls) == rep.simulations["full_simulations"] <= 1 + top_k
-    assert 23 <= len(search_calls) == rep.simulations["search_simulations"] <= 24
+    # a numerics check (when a search level stands for the named effect) runs where the search
+    # ran, each factor with its own baseline run
+    n_num = rep.simulations.get("numerics_simulations", 0)
+    assert n_num == (2 * (1 + 5) if rep.fit["full_search"].get("named") else 0)
+    assert 23 <= len(search_calls) - n_num == rep.simulations["search_simulations"] <= 24
     assert search_calls[0] == {}  # the search simulator's own baseline run comes first
     assert rep.fit["full_search"]["tier"] == "search simulator"
     assert rep.missing_physics == "soil_layering", rep.decision
@@ -1031,3 +1101,31 @@ def test_a_recording_longer_than_the_simulation_is_compared_where_both_exist(lay
     assert long_rep.fit["after"]["overall"] == hand_rep.fit["after"]["overall"]
     # a recording within the simulation's span (0.15 s) is not touched
     assert diagnose(base, by_hand).fit["cropped_to_simulation"] is None
+
+
+def test_grain_radius_factor_of_the_numerics_check(tmp_path):
+    """``numerics.radius_scale`` (the numerics check's runs) becomes the scenario's grain radius
+    times the factor, on top of a radius the overrides set themselves (the coarse search tier),
+    and is no scenario field; a factor outside [0.5, 2] and a bad ``--numerics-check`` are errors
+    naming the field and the allowed range."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.cli import _numerics_scales
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY, scenario_overrides
+    from crashdem.diagnosis.generator_dem import scenario_path
+
+    scen = scenario.load(scenario_path())
+    r0 = scen.get("soil.radius")
+    ov = scenario_overrides(scen, {RADIUS_SCALE_KEY: 0.9, "physics.cohesion.enabled": True})
+    assert ov["soil.radius"] == pytest.approx(0.9 * r0) and RADIUS_SCALE_KEY not in ov
+    assert scen.with_overrides(ov).get("soil.radius") == pytest.approx(0.9 * r0)
+    assert scenario_overrides(scen, {RADIUS_SCALE_KEY: 1.1, "soil.radius": 0.1})[
+        "soil.radius"] == pytest.approx(0.11)
+    assert "soil.radius" not in scenario_overrides(scen, {"physics.cohesion.enabled": True})
+    with pytest.raises(ValueError, match=r"numerics.radius_scale=3.0: must be in \[0.5, 2\]"):
+        scenario_overrides(scen, {RADIUS_SCALE_KEY: 3.0})
+    assert _numerics_scales(None) == (0.9, 1.1) and _numerics_scales("off") == ()
+    assert _numerics_scales("0.8,1.2") == (0.8, 1.2)
+    with pytest.raises(ValueError, match=r"--numerics-check='0.9,x'.*\[0.5, 2\]"):
+        _numerics_scales("0.9,x")
+    with pytest.raises(ValueError, match=r"--numerics-check='0.3'.*factor 0.3 is outside"):
+        _numerics_scales("0.3")
