@@ -684,8 +684,10 @@ class _Confirmation:
             mine = [r for r in rows if r["overrides"].get(RADIUS_SCALE_KEY) == float(f)]
             ref = next((r for r in mine if r["hypothesis"] == "baseline"), None)
             lv = [r for r in mine if "search_value" in r]
-            if ref is not None:
-                lv = [self.anchored(r, ref) for r in lv]
+            if tier is not None:
+                # anchored on this factor's own baseline run; without it nothing is located
+                lv = [self.anchored(r, ref) for r in lv] if ref is not None and "rss" in ref \
+                    else []
             for r in lv:
                 if "rss" in r:
                     r["delta_bic_vs_reference"] = base_bic - self.bic(r["rss"], 1)
