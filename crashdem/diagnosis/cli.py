@@ -411,20 +411,22 @@ def _numerics_scales(text: str | None) -> tuple[float, ...]:
     """``--numerics-check``: the grain-radius factors of the numerics check of a named value
     (default ``confirm.NUMERICS_RADIUS_SCALES``; ``off`` = none)."""
     from crashdem.diagnosis.confirm import NUMERICS_RADIUS_SCALES
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_RANGE
 
     if text is None:
         return tuple(NUMERICS_RADIUS_SCALES)
     if text.strip().lower() in ("off", "none", ""):
         return ()
+    lo, hi = RADIUS_SCALE_RANGE
     try:
         out = tuple(float(v) for v in text.split(","))
     except ValueError:
         raise ValueError(f"--numerics-check={text!r}: must be comma-separated grain-radius "
-                         f"factors in [0.5, 2] (e.g. 0.9,1.1) or off") from None
-    bad = [f for f in out if not 0.5 <= f <= 2.0]
+                         f"factors in [{lo:g}, {hi:g}] (e.g. 0.9,1.1) or off") from None
+    bad = [f for f in out if not lo <= f <= hi]
     if bad:
-        raise ValueError(f"--numerics-check={text!r}: factor {bad[0]:g} is outside [0.5, 2] "
-                         f"(a factor on the scenario's grain radius)")
+        raise ValueError(f"--numerics-check={text!r}: factor {bad[0]:g} is outside "
+                         f"[{lo:g}, {hi:g}] (a factor on the scenario's grain radius)")
     return out
 
 

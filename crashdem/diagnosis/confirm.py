@@ -1056,20 +1056,15 @@ def _profile(runs: Iterable[dict[str, Any]], fs: catalogue.FullSearch
 def _profile_optimum(levels: Iterable[dict[str, Any]], fs: catalogue.FullSearch
                      ) -> float | None:
     """The search coordinate a profile of search levels (one effect, refinements aside)
-    locates: the vertex of the parabola through its best level and the two neighbours when
-    that level is interior and the parabola opens downwards (within the neighbours, as the
-    refinement's ``_search_vertex``), else the best level; None without a scored level."""
-    lv = sorted((r for r in levels if not r.get("refined") and "delta_bic_vs_reference" in r
-                 and math.isfinite(float(r["delta_bic_vs_reference"]))),
-                key=lambda r: r["search_value"])
+    locates: the refinement's vertex (``_search_vertex``) of its best level when there is one,
+    else the best level; None without a scored level."""
+    lv = [r for r in levels if not r.get("refined") and "delta_bic_vs_reference" in r
+          and math.isfinite(float(r["delta_bic_vs_reference"]))]
     if not lv:
         return None
-    i = max(range(len(lv)), key=lambda j: lv[j]["delta_bic_vs_reference"])
-    par = _parabola(lv, i, fs)
-    if par is None or not par[1] < 0.0:
-        return fs.coord(float(lv[i]["search_value"]))
-    u, a2, a1 = par
-    return float(np.clip(-a1 / (2.0 * a2), u[0], u[2]))
+    best = max(lv, key=lambda r: r["delta_bic_vs_reference"])
+    v = _search_vertex(best, lv, fs)
+    return fs.coord(float(v["value"] if v is not None else best["search_value"]))
 
 
 def _realisation_interval(lv: list[dict[str, Any]], x: float, margin: float,

@@ -41,6 +41,8 @@ __all__ = ["DaskFullSimulator", "distributed_confirm", "full_simulator_from_args
 #: override key of a run with the scenario's grain radius times this factor (not a scenario
 #: field: ``scenario_overrides`` makes it ``soil.radius``)
 RADIUS_SCALE_KEY = "numerics.radius_scale"
+#: allowed range of that factor
+RADIUS_SCALE_RANGE = (0.5, 2.0)
 
 
 def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str, Any]:
@@ -54,7 +56,7 @@ def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str,
     compacted layer at 1 m) ends the soil column before the interface, so the lower layer is
     not there: the run gets ``physics.soil_layering.enabled = false`` unless the overrides set
     the layering themselves (before, such a floor was refused by the scenario check and every
-    floor above 1 m went unsearched). ``numerics.radius_scale`` (``confirm.NUMERICS_KEY``: the
+    floor above 1 m went unsearched). ``numerics.radius_scale`` (``RADIUS_SCALE_KEY``: the
     numerics check of a named value) multiplies the scenario's grain radius.
     """
     from crashdem.diagnosis.cli import _apply_scales
@@ -64,9 +66,10 @@ def scenario_overrides(scenario: Any, overrides: Mapping[str, Any]) -> dict[str,
             if not k.startswith("calibration.") and k != RADIUS_SCALE_KEY}
     if RADIUS_SCALE_KEY in overrides:
         f = float(overrides[RADIUS_SCALE_KEY])
-        if not 0.5 <= f <= 2.0:
-            raise ValueError(f"{RADIUS_SCALE_KEY}={f!r}: must be in [0.5, 2] (a factor on the "
-                             f"scenario's grain radius)")
+        lo, hi = RADIUS_SCALE_RANGE
+        if not lo <= f <= hi:
+            raise ValueError(f"{RADIUS_SCALE_KEY}={f!r}: must be in [{lo:g}, {hi:g}] (a factor "
+                             f"on the scenario's grain radius)")
         keys["soil.radius"] = float(keys.get("soil.radius", scenario.get("soil.radius"))) * f
 
     def get(key: str) -> Any:
