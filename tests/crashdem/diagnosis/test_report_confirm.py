@@ -878,6 +878,60 @@ def test_a_claim_must_also_hold_on_the_search_tier(coarse_level_db, coarse_score
     assert c.decide(full).confirmed == "soil_layering"
 
 
+@pytest.mark.parametrize("floor_db, floor_score, named", [
+    (47.6, 0.646, None), (47.6, 0.640, "soil_layering"), (40.0, 0.646, "soil_layering")])
+def test_a_named_level_outranked_on_the_search_tier_is_not_told_apart(floor_db, floor_score,
+                                                                      named):
+    """Two-tier confirmation: layering's best coarse level (0.3 m, Delta BIC 42.0, score 0.72)
+    is promoted and its full run beats the reference decisively. The floor's best coarse level
+    (0.7 m) fits with a higher likelihood (47.6) and scores no worse than the best replicate
+    (0.646 against 0.645) but misses the 0.02 score margin of promotion, so it never ran in the
+    full model: the two are not told apart and neither is named (``fit.confirmation_ambiguous``,
+    both verdict lines say why). A floor level scoring below the replicates (0.640), or less
+    likely than layering's (40.0), does not contest: layering is named. Without the search tier
+    (one tier, every run judged in the same decision) the rule does not apply. Numbers: the
+    Yade floor recording at 0.6 m depth on the default CLI path, which named layering before."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
+                                            _realisation_floor, _SearchTier)
+
+    tier_rows = ([_run("baseline", 0.0, 0.60)]
+                 + [_run("soil_layering", db, sc, v) for db, sc, v in
+                    ((22.7, 0.74, 0.2), (42.0, 0.72, 0.3), (14.6, 0.66, 0.4))]
+                 + [_run("boundary_proximity", db, sc, v) for db, sc, v in
+                    ((33.7, 0.62, 0.6), (floor_db, floor_score, 0.7), (14.4, 0.43, 0.8))]
+                 + [_run(REPLICATE, db, sc) for db, sc in ((-4.0, 0.50), (10.5, 0.53),
+                                                           (17.5, 0.645), (5.8, 0.615))])
+    tier = _SearchTier(tier_rows, _realisation_floor(tier_rows, 0.60), [], [], {})
+    assert tier.floor["score"] == 0.645 and tier.floor["delta_bic"] == 17.5
+    rows = [_run("recalibration", 0.0, 0.60), _run("soil_layering", 64.5, 0.84, 0.3)]
+    full = _FullTier(rows, 0.60, _realisation_floor(rows, 0.60))
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+    c.searched, c.model_free = dict(FS), None
+    d = c.decide(full, tier)
+    assert d.confirmed == named
+    assert ("confirmation_ambiguous" in c.rep.fit) == (named is None)
+    if named is None:
+        assert d.ambiguous == ["soil_layering", "boundary_proximity"]
+        assert d.contested["delta_bic"] == 47.6 and d.contested["own_delta_bic"] == 42.0
+        assert d.contested["tier"] == "search simulator" and d.contested["value"] == 0.7
+        assert d.best is rows[0]
+        v = c.verdicts(full, d)
+        assert "not told apart" in v["soil_layering"] and "boundary_proximity" in v["soil_layering"]
+        c.replicates = []
+        line = c.sentence(full, tier, d)
+        assert ("soil_layering would be named, but boundary_proximity fits the recording with a "
+                "higher likelihood on the search simulator (Delta BIC 47.6 against 42.0)") in line
+        assert line.endswith("neither named; no missing physics confirmed")
+    else:
+        assert d.contested is None and d.best is rows[1]
+    c2 = object.__new__(_Confirmation)
+    c2.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+    c2.searched, c2.model_free = dict(FS), None
+    assert c2.decide(full).confirmed == "soil_layering"
+
+
 @pytest.mark.parametrize("confirmed", ["boundary_proximity", None])
 def test_ranking_follows_the_confirmation(confirmed):
     """After the full-model confirmation the hypotheses are ordered by the evidence it ended
