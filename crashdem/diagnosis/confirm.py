@@ -534,7 +534,7 @@ class _Confirmation:
                 confirmed, best = top["hypothesis"], top
         contested = None
         if confirmed is not None and not self.model_free:
-            contested = self._likelihood_rival(confirmed, best, full, tier)
+            contested = self._likelihood_rival(confirmed, best, tier)
             if contested is not None:
                 ambiguous = [confirmed, contested["rival"]]
                 rep.fit["confirmation_ambiguous"] = {
@@ -547,7 +547,7 @@ class _Confirmation:
         return _Decision(confirmed, best, screened, claim_stood, ambiguous, best_h, unsupported,
                          contested)
 
-    def _likelihood_rival(self, name: str, run: Row, full: _FullTier,
+    def _likelihood_rival(self, name: str, run: Row,
                           tier: _SearchTier | None) -> dict[str, Any] | None:
         """On a two-tier confirmation, another effect that leaves ``name`` (about to be named
         by its promoted search level's full run ``run``) not told apart from it, or None: a
@@ -576,8 +576,7 @@ class _Confirmation:
         out = self.faded_out(rows)
         found = [r for r in rows
                  if r["hypothesis"] not in (name, REPLICATE, RECALIBRATION.name, *out)
-                 and self.located(r) and "delta_bic_vs_reference" in r
-                 and math.isfinite(r["score"]) and _contends(r, floor)
+                 and self.located(r) and math.isfinite(r["score"]) and _contends(r, floor)
                  and r["delta_bic_vs_reference"] > own["delta_bic_vs_reference"]]
         if not found:
             return None
@@ -625,7 +624,7 @@ class _Confirmation:
             r = d.best_by_effect.get(name)
             if name == d.confirmed:
                 why = "named"
-            elif d.contested is not None and name in (d.ambiguous or ()):
+            elif d.contested is not None and name in d.ambiguous:
                 why = _contested_verdict(name, d.ambiguous, d.contested)
             elif r is not None and r is d.screened and d.unsupported:
                 why = d.unsupported
@@ -696,10 +695,9 @@ class _Confirmation:
             if tier is not None:
                 rep.fit["full_search"]["search_baseline_score"] = tier.rows[0]["score"]
                 rep.fit["full_search"]["verdicts"] = tier.verdicts
-                c = d.contested
-                if c is not None and c["tier"] == "search simulator" and d.ambiguous[1] in tier.verdicts:
+                if d.contested is not None and d.ambiguous[1] in tier.verdicts:
                     tier.verdicts[d.ambiguous[1]] += "; " + _contested_verdict(
-                        d.ambiguous[1], d.ambiguous, c)
+                        d.ambiguous[1], d.ambiguous, d.contested)
                 rep.simulations["search_simulations"] = len(tier.rows)
         rep.fit["confirmation"] = [{k: (None if k == "score" and not math.isfinite(v) else v)
                                     for k, v in r.items() if k != "aligned"} for r in rows]
@@ -973,13 +971,15 @@ def _not_decisively_worse(r: dict[str, Any], floor: dict[str, float]) -> bool:
             and r["score"] >= floor["score"] - CONFIRM_MIN_GAIN)
 
 
-def _contends(r: dict[str, Any], floor: dict[str, float]) -> bool:
-    """A scored run that beats the reference and the best replicate in Delta BIC as a decisive
-    run does and scores no worse than the best of reference and replicates (without the
-    ``CONFIRM_MIN_GAIN`` margin naming asks for): it can leave a named effect not told apart."""
+def _contends(r: dict[str, Any], floor: dict[str, float], gain: float = 0.0) -> bool:
+    """A scored run that beats the reference (Delta BIC > ``ACCEPT_MARGIN``) and the best
+    replicate (by ``REALISATION_MARGIN``) in Delta BIC and scores at least ``gain`` above the
+    best of reference and replicates. With ``gain`` 0 (no score margin) it can leave a named
+    effect not told apart (``_Confirmation._likelihood_rival``); ``_decisive`` asks for
+    ``CONFIRM_MIN_GAIN``."""
     db = r["delta_bic_vs_reference"]
     return (db > ACCEPT_MARGIN and db - floor["delta_bic"] > REALISATION_MARGIN
-            and r["score"] >= floor["score"])
+            and r["score"] - floor["score"] >= gain)
 
 
 def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
@@ -987,9 +987,7 @@ def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
     ``floor`` (Delta BIC above the best replicate's by ``REALISATION_MARGIN``, score by
     ``CONFIRM_MIN_GAIN`` above the best of reference and replicates): the rule for naming a
     full run and for promoting a search-tier level to one."""
-    db = r["delta_bic_vs_reference"]
-    return (db > ACCEPT_MARGIN and db - floor["delta_bic"] > REALISATION_MARGIN
-            and r["score"] - floor["score"] >= CONFIRM_MIN_GAIN)
+    return _contends(r, floor, CONFIRM_MIN_GAIN)
 
 
 def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float) -> dict[str, float]:

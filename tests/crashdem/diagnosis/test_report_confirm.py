@@ -906,9 +906,14 @@ def test_a_named_level_outranked_on_the_search_tier_is_not_told_apart(floor_db, 
     assert tier.floor["score"] == 0.645 and tier.floor["delta_bic"] == 17.5
     rows = [_run("recalibration", 0.0, 0.60), _run("soil_layering", 64.5, 0.84, 0.3)]
     full = _FullTier(rows, 0.60, _realisation_floor(rows, 0.60))
-    c = object.__new__(_Confirmation)
-    c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
-    c.searched, c.model_free = dict(FS), None
+
+    def confirmation():
+        c = object.__new__(_Confirmation)
+        c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+        c.searched, c.model_free = dict(FS), None
+        return c
+
+    c = confirmation()
     d = c.decide(full, tier)
     assert d.confirmed == named
     assert ("confirmation_ambiguous" in c.rep.fit) == (named is None)
@@ -926,10 +931,7 @@ def test_a_named_level_outranked_on_the_search_tier_is_not_told_apart(floor_db, 
         assert line.endswith("neither named; no missing physics confirmed")
     else:
         assert d.contested is None and d.best is rows[1]
-    c2 = object.__new__(_Confirmation)
-    c2.rep = type("R", (), {"missing_physics": None, "fit": {}})()
-    c2.searched, c2.model_free = dict(FS), None
-    assert c2.decide(full).confirmed == "soil_layering"
+    assert confirmation().decide(full).confirmed == "soil_layering"
 
 
 @pytest.mark.parametrize("confirmed", ["boundary_proximity", None])
