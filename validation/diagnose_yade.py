@@ -4,6 +4,8 @@ Yade 2023.02a, diagnosed against crashdem's own DEM baseline.
     python validation/diagnose_yade.py                  # 6 effects x seeds 11, 12 + nulls 21, 22
     python validation/diagnose_yade.py --effects cohesion --seeds 11
     python validation/diagnose_yade.py --scenario validation/scenarios/drop_s2_h5p00.toml
+    python validation/diagnose_yade.py --effects cohesion --seeds 31 --fix cohesion=1e6 \
+        --nulls --filter-seeds --levels                 # a stronger effect than the drawn span
 
 Each case: ``validation.diagnosis_yade.cases.yade_case`` (Yade deposition, contact laws, time
 step and effect implementation; lab acquisition), then ``crashdem.diagnosis.screen_then_confirm``
@@ -39,13 +41,15 @@ FILTER_CLASSES = (180.0, 600.0, 1000.0)
 
 
 def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
-                  filter_class: bool = False, raw: bool = False) -> dict:
+                  filter_class: bool = False, raw: bool = False,
+                  fixed: dict[str, float] | None = None) -> dict:
     """Make (or load) one Yade case and diagnose it; returns the table row.
 
     ``filter_class``: the null physics of ``seed`` acquired at a class drawn from
     ``FILTER_CLASSES`` and not declared (truth: ``sensor_dynamics``, filter-class form).
     ``raw``: the recording is Yade's raw output (no acquisition, no noise, no filter, no
-    pre-trigger; ``cases.yade_case(..., raw=True)``)."""
+    pre-trigger; ``cases.yade_case(..., raw=True)``). ``fixed``: drawn parameters of
+    ``effect`` pinned to values (``cases.yade_case(..., fixed=...)``)."""
     import numpy as np
 
     from crashdem.diagnosis import screen_then_confirm
@@ -58,7 +62,7 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
         case = yade_case(seed, None, cfc=cfc, declare_cfc=False)
         effect = "sensor_dynamics"
     else:
-        case = yade_case(seed, effect, raw=raw)
+        case = yade_case(seed, effect, raw=raw, fixed=fixed)
     t1 = time.perf_counter()
     rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
                               impact_speed=impact_speed(), baseline_raw=dem_baseline_raw(),
@@ -82,6 +86,7 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
             "score_before": rep.fit["before"]["overall"], "score_after": after,
             "full_simulations": rep.simulations["full_simulations"],
             "realisation_floor_delta_bic": rep.fit.get("realisation", {}).get("floor_delta_bic"),
+            "search_best": rep.fit.get("full_search", {}).get("best", {}),
             "grains": case.meta["grains"], "yade_dt_s": case.meta["dt"],
             "case_wall_s": t1 - t0, "diagnosis_wall_s": t2 - t1, "decision": rep.decision}
 
@@ -100,11 +105,31 @@ def main(argv=None) -> int:
                     help="diagnose Yade's raw output (no lab acquisition: no noise, filter or "
                          "pre-trigger) instead of lab channels")
     ap.add_argument("--top-k", type=int, default=TOP_K)
+    ap.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE",
+                    help="pin a drawn parameter of the effect cases to a value, e.g. a stronger "
+                         "effect than the drawn span: --effects cohesion --seeds 31 --fix "
+                         "cohesion=1e6 (names: validation.diagnosis_yade.cases.YADE_EFFECT_DRAWS)")
+    ap.add_argument("--levels", action="store_true",
+                    help="print each case's best full-model search level per effect")
     ap.add_argument("--scenario", default=None,
                     help="drop-test scenario of the Yade truth and crashdem's baseline (default: "
                          "validation/scenarios/drop_s2_h13p70.toml; e.g. drop_s2_h5p00.toml for "
                          "the 5 m drop)")
     args = ap.parse_args(argv)
+    fixed: dict[str, float] = {}
+    for item in args.fix:
+        name, sep, value = item.partition("=")
+        try:
+            fixed[name] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            ap.error(f"--fix {item!r}: must be NAME=VALUE with a number, e.g. cohesion=1e6")
+    for eff in args.effects:
+        unknown = sorted(set(fixed) - set(YADE_EFFECT_DRAWS.get(eff, {})))
+        if unknown:
+            ap.error(f"--fix {unknown}: not drawn parameters of {eff}; allowed: "
+                     f"{sorted(YADE_EFFECT_DRAWS.get(eff, {}))}")
     if args.scenario is not None:
         from crashdem.diagnosis.generator_dem import use_scenario
 
@@ -117,7 +142,7 @@ def main(argv=None) -> int:
     rows = []
     for eff in args.effects:
         for s in args.seeds:
-            rows.append(diagnose_case(eff, s, args.top_k, raw=args.raw))
+            rows.append(diagnose_case(eff, s, args.top_k, raw=args.raw, fixed=fixed))
             r = rows[-1]
             print(f"{eff:20s} seed {s}: claimed={r['claimed']} top={r['top_ranked']} "
                   f"dBIC={r['top_delta_bic']:.1f} score {r['score_before']:.3f} -> "
@@ -138,6 +163,16 @@ def main(argv=None) -> int:
         print(f"{'null':20s} seed {s}: claimed={r['claimed']} top={r['top_ranked']} "
               f"dBIC={r['top_delta_bic']:.1f} score {r['score_before']:.3f} -> "
               f"{r['score_after']:.3f}", flush=True)
+    if args.levels:
+        print("\nbest full-model search level per effect (value, Delta BIC over the reference, "
+              "score; realisation floor = best replicate's Delta BIC):")
+        for r in rows:
+            best = r["search_best"]
+            print(f"{str(r['truth'] or 'null'):20s} seed {r['seed']}: floor "
+                  f"{r['realisation_floor_delta_bic'] or 0.0:.1f}; " + "; ".join(
+                      f"{n} {b['value']:.4g} ({b['delta_bic_vs_reference']:.1f}, "
+                      f"{b['score']:.3f})" for n, b in sorted(
+                          best.items(), key=lambda kv: -kv[1]["delta_bic_vs_reference"])))
     conf = Counter((r["truth"] or "null", r["claimed"] or "none") for r in rows)
     print("\nYade truth -- confusion (truth -> claimed missing physics):")
     for (tr, cl), n in sorted(conf.items()):

@@ -38,7 +38,7 @@ import shutil
 import subprocess
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -59,6 +59,15 @@ YADE_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
     "initial_conditions": {"speed_offset": (2.5, 4.0, "lin")},
     "sensor_dynamics": {"natural_frequency": (40.0, 90.0, "log"),
                         "damping_ratio": (0.05, 0.15, "lin")},
+}
+#: drawn parameter -> (exclusive low, high, unit) a pinned value (``yade_case(fixed=...)``) may
+#: take: the bed stays under the 2 m tank's soil, the layer inside the bed, the speed offset
+#: leaves a positive impact speed, the mount within the 12.5 kHz acquisition
+FIXED_LIMITS: dict[str, tuple[float, float, str]] = {
+    "layer_depth": (0.0, 1.5, "m"), "layer_young_factor": (0.0, 100.0, "1"),
+    "bed_depth": (0.3, 2.0, "m"), "cohesion": (0.0, 1.0e8, "Pa"),
+    "speed_offset": (-10.0, 10.0, "m/s"), "natural_frequency": (1.0, 2000.0, "Hz"),
+    "damping_ratio": (0.0, 2.0, "1"),
 }
 #: drawn parameter -> ROM parameter with the same meaning (compared by the validation)
 COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
@@ -133,7 +142,8 @@ RAW_SAMPLE_RATE = 20000.0
 
 
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
-              cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False) -> YadeCase:
+              cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False,
+              fixed: Mapping[str, float] | None = None) -> YadeCase:
     """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
     drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline.
 
@@ -143,10 +153,24 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     lab channel -- the drop mass's specific force and velocity from the start of the Yade run
     (the sphere 1 cm above the grains, so under 1 ms before contact), linearly resampled at
     ``RAW_SAMPLE_RATE``, no noise, no filter, no trigger offset (the sensor effect still
-    applied)."""
+    applied).
+
+    ``fixed`` pins drawn parameters of ``effect`` (names of ``YADE_EFFECT_DRAWS[effect]``) to
+    given values, e.g. a stronger effect than the drawn span (``{"cohesion": 1e6}``); the seed
+    still draws everything else as without it (the draws are made, then replaced)."""
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
+    fixed = dict(fixed or {})
+    allowed = YADE_EFFECT_DRAWS[effect] if effect is not None else {}
+    for k, v in fixed.items():
+        if k not in allowed:
+            raise ValueError(f"fixed[{k!r}]: not a drawn parameter of effect={effect!r}; "
+                             f"allowed: {sorted(allowed)}")
+        lim = FIXED_LIMITS[k]
+        if not (math.isfinite(float(v)) and lim[0] < float(v) <= lim[1]):
+            raise ValueError(f"fixed[{k!r}]={v!r}: must be in ({lim[0]:g}, {lim[1]:g}] "
+                             f"[{lim[2]}]")
     cache = Path(cache or cache_dir())
     rng = np.random.default_rng(10_000 + seed)
     drawn: dict[str, Any] = {}
@@ -155,6 +179,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
             drawn[k] = _draw(lo, hi, sc_, rng)
         if effect == "initial_conditions" and rng.uniform() < 0.5:
             drawn["speed_offset"] *= -1.0
+        drawn.update({k: float(v) for k, v in fixed.items()})
         if effect == "sensor_dynamics":
             drawn["model"] = "mount" if rng.uniform() < 0.5 else "lowpass"
         if effect == "particle_rotation":
