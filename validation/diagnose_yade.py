@@ -105,7 +105,7 @@ def main(argv=None) -> int:
                     help="diagnose Yade's raw output (no lab acquisition: no noise, filter or "
                          "pre-trigger) instead of lab channels")
     ap.add_argument("--top-k", type=int, default=TOP_K)
-    ap.add_argument("--fix", nargs="*", default=[], metavar="NAME=VALUE",
+    ap.add_argument("--fix", nargs="+", action="extend", default=[], metavar="NAME=VALUE",
                     help="pin a drawn parameter of the effect cases to a value, e.g. a stronger "
                          "effect than the drawn span: --effects cohesion --seeds 31 --fix "
                          "cohesion=1e6 (names: validation.diagnosis_yade.cases.YADE_EFFECT_DRAWS)")

@@ -57,7 +57,10 @@ def test_a_pin_outside_the_truth_is_refused_with_its_name_and_range(monkeypatch,
 
 
 @pytest.mark.parametrize("argv", [["--fix", "cohesion"], ["--fix", "cohesion=strong"],
-                                  ["--effects", "cohesion", "--fix", "bed_depth=0.6"]])
+                                  ["--effects", "cohesion", "--fix", "bed_depth=0.6"],
+                                  # a later --fix adds to an earlier one, not replaces it
+                                  ["--effects", "cohesion", "--fix", "bed_depth=0.6",
+                                   "--fix", "cohesion=1e6"]])
 def test_the_script_refuses_a_malformed_pin(argv, capsys):
     from validation.diagnose_yade import main
 
