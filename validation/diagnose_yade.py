@@ -30,8 +30,8 @@ ROOT = Path(__file__).resolve().parent.parent
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from validation.diagnosis_yade.cases import (YADE_EFFECT_DRAWS, yade_available,  # noqa: E402
-                                             yade_case)
+from validation.diagnosis_yade.cases import (YADE_EFFECT_DRAWS, check_fixed,  # noqa: E402
+                                             yade_available, yade_case)
 
 TOP_K = 2
 
@@ -125,11 +125,12 @@ def main(argv=None) -> int:
             sep = ""
         if not sep:
             ap.error(f"--fix {item!r}: must be NAME=VALUE with a number, e.g. cohesion=1e6")
-    for eff in args.effects:
-        unknown = sorted(set(fixed) - set(YADE_EFFECT_DRAWS.get(eff, {})))
-        if unknown:
-            ap.error(f"--fix {unknown}: not drawn parameters of {eff}; allowed: "
-                     f"{sorted(YADE_EFFECT_DRAWS.get(eff, {}))}")
+    for eff in args.effects if fixed else ():
+        # every pin checked before the first Yade run, not when its case comes up
+        try:
+            check_fixed(eff, fixed)
+        except ValueError as err:
+            ap.error(f"--fix (effect {eff}): {err}")
     if args.scenario is not None:
         from crashdem.diagnosis.generator_dem import use_scenario
 

@@ -58,6 +58,8 @@ def test_a_pin_outside_the_truth_is_refused_with_its_name_and_range(monkeypatch,
 
 @pytest.mark.parametrize("argv", [["--fix", "cohesion"], ["--fix", "cohesion=strong"],
                                   ["--effects", "cohesion", "--fix", "bed_depth=0.6"],
+                                  # out of the truth's range: refused before any Yade run
+                                  ["--effects", "boundary_proximity", "--fix", "bed_depth=2.5"],
                                   # a later --fix adds to an earlier one, not replaces it
                                   ["--effects", "cohesion", "--fix", "bed_depth=0.6",
                                    "--fix", "cohesion=1e6"]])

@@ -141,6 +141,23 @@ def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, An
 RAW_SAMPLE_RATE = 20000.0
 
 
+def check_fixed(effect: str | None, fixed: Mapping[str, float] | None) -> dict[str, float]:
+    """``fixed`` (pinned draws of ``effect``, ``yade_case``) as floats; ValueError naming the
+    parameter when ``effect`` does not draw it or the value is outside ``FIXED_LIMITS``."""
+    allowed = YADE_EFFECT_DRAWS.get(effect, {}) if effect is not None else {}
+    out: dict[str, float] = {}
+    for k, v in (fixed or {}).items():
+        if k not in allowed:
+            raise ValueError(f"fixed[{k!r}]: not a drawn parameter of effect={effect!r}; "
+                             f"allowed: {sorted(allowed)}")
+        lim = FIXED_LIMITS[k]
+        if not (math.isfinite(float(v)) and lim[0] < float(v) <= lim[1]):
+            raise ValueError(f"fixed[{k!r}]={v!r}: must be in ({lim[0]:g}, {lim[1]:g}] "
+                             f"[{lim[2]}]")
+        out[k] = float(v)
+    return out
+
+
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
               cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False,
               fixed: Mapping[str, float] | None = None) -> YadeCase:
@@ -161,16 +178,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
-    fixed = dict(fixed or {})
-    allowed = YADE_EFFECT_DRAWS[effect] if effect is not None else {}
-    for k, v in fixed.items():
-        if k not in allowed:
-            raise ValueError(f"fixed[{k!r}]: not a drawn parameter of effect={effect!r}; "
-                             f"allowed: {sorted(allowed)}")
-        lim = FIXED_LIMITS[k]
-        if not (math.isfinite(float(v)) and lim[0] < float(v) <= lim[1]):
-            raise ValueError(f"fixed[{k!r}]={v!r}: must be in ({lim[0]:g}, {lim[1]:g}] "
-                             f"[{lim[2]}]")
+    fixed = check_fixed(effect, fixed)
     cache = Path(cache or cache_dir())
     rng = np.random.default_rng(10_000 + seed)
     drawn: dict[str, Any] = {}
@@ -179,7 +187,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
             drawn[k] = _draw(lo, hi, sc_, rng)
         if effect == "initial_conditions" and rng.uniform() < 0.5:
             drawn["speed_offset"] *= -1.0
-        drawn.update({k: float(v) for k, v in fixed.items()})
+        drawn.update(fixed)
         if effect == "sensor_dynamics":
             drawn["model"] = "mount" if rng.uniform() < 0.5 else "lowpass"
         if effect == "particle_rotation":
