@@ -140,6 +140,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "on the simulator the search runs on; an effect must fit the recording "
                         "better than every one of them (the realisation floor; default 4 with "
                         "the full-model search, 0 = none)")
+    d.add_argument("--level-beds", type=int, default=None, metavar="N",
+                   help="run each search level of an effect that deposits its own bed (floor, "
+                        "interface depth) on N beds: the baseline's packing and the first N - 1 "
+                        "replicates', each taken against the baseline run of its bed, and "
+                        "average the changes (default 5, at most 1 + --replicates; 1 = one bed "
+                        "per level)")
     d.add_argument("--numerics-check", default=None, metavar="F[,F...]|off",
                    help="rerun a named soil effect's search levels with the grain radius times "
                         "each factor and widen its uncertainty to how far the value moves "

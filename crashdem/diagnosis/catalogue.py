@@ -329,7 +329,10 @@ class FullSearch:
     interface, a restitution or rolling resistance nearer the blocked/elastic baseline; "low":
     a weaker cohesion): a best run at that end is not a located effect but "a little of it",
     the shape a code-to-code or packing difference also takes, so it names nothing
-    (``located``)."""
+    (``located``). ``deposits`` says that every level deposits a bed of its own (a floor or
+    an interface depth changes the deposition): a level then differs from the baseline by its
+    packing as well as by the effect, and ``screen_then_confirm`` runs it on several beds
+    (``level_beds``) paired with the replicate packings."""
 
     parameter: str
     unit: str
@@ -338,6 +341,7 @@ class FullSearch:
     fixed: dict[str, Any] = field(default_factory=dict)
     scale: str = "lin"
     fades: str = "high"
+    deposits: bool = False
 
     def __post_init__(self) -> None:
         if len(self.values) < 2 or any(b <= a for a, b in zip(self.values, self.values[1:])):
@@ -384,10 +388,12 @@ class FullSearch:
 DROP_FULL_SEARCH: dict[str, FullSearch] = {
     "soil_layering": FullSearch(
         "interface_depth", "m", ("physics.soil_layering.depth",), (0.15, 0.2, 0.3, 0.4, 0.5),
-        {"physics.soil_layering.enabled": True, "physics.soil_layering.lower_young_factor": 5.0}),
+        {"physics.soil_layering.enabled": True, "physics.soil_layering.lower_young_factor": 5.0},
+        deposits=True),
     "boundary_proximity": FullSearch(
         "floor_depth", "m", ("physics.boundary_proximity.floor_depth",),
-        (0.6, 0.7, 0.8, 0.9, 1.05, 1.25), {"physics.boundary_proximity.enabled": True}),
+        (0.6, 0.7, 0.8, 0.9, 1.05, 1.25), {"physics.boundary_proximity.enabled": True},
+        deposits=True),
     "cohesion": FullSearch(
         "cohesion", "Pa", ("physics.cohesion.normal_strength",
                                    "physics.cohesion.shear_strength"),

@@ -367,6 +367,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
                                   numerics=_numerics_scales(getattr(args, "numerics_check", None)),
+                                  level_beds=_level_beds(getattr(args, "level_beds", None)),
                                   **cat_kw)
         rep.simulations["full_search"] = search_how
         if hasattr(full, "describe"):
@@ -405,6 +406,19 @@ def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
     from crashdem.diagnosis import replicate_overrides
 
     return replicate_overrides(scen.get("scenario.seed"), n)
+
+
+def _level_beds(n: int | None) -> int:
+    """``--level-beds``: beds per search level of a deposited effect (default
+    ``confirm.LEVEL_BEDS``; used up to 1 + the number of replicates)."""
+    from crashdem.diagnosis.confirm import LEVEL_BEDS
+
+    if n is None:
+        return LEVEL_BEDS
+    if not 1 <= n <= 33:
+        raise ValueError(f"--level-beds={n!r}: must be in [1, 33] (beds per search level of a "
+                         "floor or interface depth; 1 = one bed)")
+    return int(n)
 
 
 def _numerics_scales(text: str | None) -> tuple[float, ...]:

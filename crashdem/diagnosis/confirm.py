@@ -17,7 +17,9 @@ the expensive simulator, in three stages that each have their own function here:
    report.
 
 A run is a *row*: ``{"hypothesis", "overrides", "score", "per_channel", "aligned", "rss",
-"delta_bic_vs_reference"[, "search_value", "refined", "anchored", "error"]}``.
+"delta_bic_vs_reference"[, "search_value", "refined", "anchored", "beds", "error"]}``. A
+level of an effect whose levels deposit their own bed (``FullSearch.deposits``) is one row
+pooled over its ``level_beds`` runs (``beds``: each bed's overrides and score).
 """
 from __future__ import annotations
 
@@ -39,7 +41,7 @@ from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
            "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
-           "NUMERICS_RADIUS_SCALES"]
+           "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS"]
 
 #: a full simulation must raise the overall score over the baseline by this much to confirm
 CONFIRM_MIN_GAIN = 0.02
@@ -78,6 +80,14 @@ SPEED_CHECK_SIGMAS = SPEED_OFFSET_SIGMAS
 #: ten per cent, and from another code; the realisation interval samples packings only.
 NUMERICS_RADIUS_SCALES = (0.9, 1.1)
 
+#: beds per search level of an effect whose levels deposit their own bed
+#: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
+#: packing seed and the first ``LEVEL_BEDS - 1`` replicate seeds, each taken as its change
+#: against the baseline run of the same seed (the replicate), and the changes averaged. One bed
+#: per level left the level-to-level packing scatter (measured +-10-15 Delta BIC on the small
+#: bed, docs/diagnosis.md) above the replicates' ambiguity margin
+LEVEL_BEDS = 5
+
 Row = dict[str, Any]
 Request = tuple[str, dict[str, Any], "float | None"]
 
@@ -95,6 +105,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         search_simulator: Simulator | None = None,
                         replicates: Sequence[Mapping[str, Any]] = (),
                         numerics: Sequence[float] = NUMERICS_RADIUS_SCALES,
+                        level_beds: int = LEVEL_BEDS,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -132,6 +143,14 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         again at each (on the simulator the search ran on), and the reported uncertainty is at
         least how far the value each profile locates lies from the one at the simulation's own
         grains (``hypotheses[*].full_model.numerics``, ``fit.full_search.named.numerics``)
+    level_beds : beds per search level of an effect whose levels deposit their own bed
+        (``FullSearch.deposits``; at most 1 + the number of replicates, ``LEVEL_BEDS``): bed
+        0 is the level with the baseline's packing seed, bed j the level with replicate j's
+        overrides. The level's prediction is the baseline plus the mean over its beds of the
+        run's change against the baseline run of the same bed (the baseline, replicate j), so
+        the packing scatter between the levels of a deposited effect falls with the number of
+        beds while each level still carries one realisation's scatter against the recording,
+        as every other run does. 1: one bed per level
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -153,8 +172,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     parameter (``hypotheses[*].full_model``; it replaces the screening's value when both mean
     the same, e.g. a floor or interface depth).
     """
+    if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
+        raise ValueError(f"level_beds={level_beds!r}: must be an integer >= 1 (beds per search "
+                         "level of an effect that deposits its own bed)")
     rep = diagnose(baseline_signals, recording_signals, **diagnose_kw)
-    c = _Confirmation(rep, top_k, full_search, diagnose_kw.get("hypotheses"), replicates)
+    c = _Confirmation(rep, top_k, full_search, diagnose_kw.get("hypotheses"), replicates,
+                      level_beds, baseline_signals)
     t_full = time.perf_counter()
     tier = (c.search_tier(search_simulator) if c.searched and search_simulator is not None
             else None)
@@ -215,7 +238,8 @@ class _Confirmation:
 
     def __init__(self, rep: Report, top_k: int,
                  full_search: bool | Mapping[str, catalogue.FullSearch],
-                 allowed: Sequence[str] | None, replicates: Sequence[Mapping[str, Any]]):
+                 allowed: Sequence[str] | None, replicates: Sequence[Mapping[str, Any]],
+                 level_beds: int = 1, baseline_signals: Mapping[str, Signal] | None = None):
         self.rep = rep
         self.chans = rep.channels
         self.primary = self.chans[0]
@@ -255,6 +279,12 @@ class _Confirmation:
                            if not self.checked and (searched or self.candidates) else [])
         self.n_eff = float(rep.fit["n_effective"])
         self.n_res = float(rep.fit["n_samples"])
+        # the beds of a deposited level: the baseline's packing, then the replicates'
+        self.beds: list[dict[str, Any]] = [{}] + self.replicates[:max(0, int(level_beds) - 1)]
+        self.baseline_signals = baseline_signals
+        # the runs each bed's change is taken against (set by the tier that runs the levels)
+        self.bed_bases: list[Row] = []
+        self.bed_anchor: Mapping[str, Signal] = rep.baseline
 
     def _candidates(self) -> list[dict[str, Any]]:
         """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
@@ -311,10 +341,72 @@ class _Confirmation:
         outs = _run_full(sim, [(n, ov) for n, ov, _ in requests])
         return [self.row(n, ov, x, o) for (n, ov, x), o in zip(requests, outs)]
 
+    def level_requests(self, name: str, x: float) -> list[Request]:
+        """Requests of the search level ``x`` of effect ``name``: one per bed when its levels
+        deposit their own bed (``FullSearch.deposits``), else one."""
+        fs = self.searched[name]
+        beds = self.beds if fs.deposits else [{}]
+        return [(name, {**fs.overrides(x), **rv, **self.cfc_key}, float(x)) for rv in beds]
+
     def levels(self, names: Sequence[str]) -> list[Request]:
         """Requests of every search level of the effects ``names``."""
-        return [(n, {**self.searched[n].overrides(x), **self.cfc_key}, float(x))
-                for n in names for x in self.searched[n].values]
+        return [q for n in names for x in self.searched[n].values
+                for q in self.level_requests(n, x)]
+
+    def pooled(self, rows: list[Row]) -> list[Row]:
+        """``rows`` with the bed runs of each deposited level replaced by one row (at the place
+        of its first bed): the anchor (``bed_anchor``) plus the mean over the beds of the run's
+        change against the run of the same bed in ``bed_bases`` (the baseline's, the
+        replicates'). Beds whose run or base failed are left out of the mean; a level with no
+        bed left is an error row. Nothing changes with one bed per level."""
+        if len(self.beds) < 2:
+            return rows
+        order: list[Any] = []
+        groups: dict[tuple[str, float, bool], list[Row]] = {}
+        for r in rows:
+            n = r["hypothesis"]
+            if "search_value" in r and n in self.searched and self.searched[n].deposits:
+                key = (n, float(r["search_value"]), bool(r.get("refined")))
+                if key not in groups:
+                    groups[key] = []
+                    order.append(key)
+                groups[key].append(r)
+            else:
+                order.append(r)
+        return [self._pool(groups[o]) if isinstance(o, tuple) else o for o in order]
+
+    def _pool(self, group: list[Row]) -> Row:
+        """One deposited level's row from its bed runs (``pooled``)."""
+        first = group[0]
+        out: Row = {"hypothesis": first["hypothesis"], "overrides": first["overrides"],
+                    "search_value": first["search_value"],
+                    "beds": [{"overrides": r["overrides"],
+                              "score": r["score"] if math.isfinite(r["score"]) else None,
+                              **({"error": r["error"]} if "error" in r else {})}
+                             for r in group]}
+        if first.get("refined"):
+            out["refined"] = True
+        pairs = [(r, b) for r, b in zip(group, self.bed_bases)
+                 if "aligned" in r and "aligned" in b]
+        if not pairs:
+            errs = [r["error"] for r in group if "error" in r]
+            return {**out, "score": -math.inf,
+                    "error": errs[0] if errs else "no bed of this level and its base ran"}
+        base = self.bed_anchor
+        al = {ch: Signal(ch, base[ch].t, base[ch].data + np.mean(
+                  [r["aligned"][ch].data - b["aligned"][ch].data for r, b in pairs], axis=0),
+                  base[ch].unit, base[ch].cfc)
+              for ch in self.chans}
+        return {**out, **self.rated(al), "rss": _full_rss(self.rep, al),
+                "beds_pooled": len(pairs)}
+
+    def set_beds(self, base0: Row, rows: Iterable[Row], anchor: Mapping[str, Signal]) -> None:
+        """The bases of the beds: ``base0`` (the baseline run of the simulator the levels run
+        on), then the replicate runs among ``rows`` in the order of ``replicates``; ``anchor``
+        is what a pooled level's mean change is added to."""
+        reps = [r for r in rows if r["hypothesis"] == REPLICATE]
+        self.bed_bases = [base0] + reps[:len(self.beds) - 1]
+        self.bed_anchor = anchor
 
     def replicate_requests(self) -> list[Request]:
         """Requests of the replicate realisations of the baseline."""
@@ -394,10 +486,10 @@ class _Confirmation:
         if v is None:
             return []
         name = top["hypothesis"]
-        extra = self.run(sim, [(name, {**self.searched[name].overrides(v["value"]),
-                                       **self.cfc_key}, v["value"])])[0]
-        extra["refined"] = True
-        return [extra]
+        runs = self.run(sim, self.level_requests(name, v["value"]))
+        for r in runs:
+            r["refined"] = True
+        return self.pooled(runs)
 
     # -- the stages ----------------------------------------------------------------------
 
@@ -415,7 +507,9 @@ class _Confirmation:
         # anchored like the screening: each search run predicts the baseline simulation plus
         # the change its effect makes in the search simulator (its run minus that simulator's
         # baseline run), so the search simulator's own misfit is not read as an effect
-        rows = [ref] + [self.anchored(r, ref) for r in raw[1:]]
+        self.set_beds(ref, raw[1:], rep.baseline)
+        rows = [ref] + [r if "beds" in r else self.anchored(r, ref)
+                        for r in self.pooled(raw[1:])]
         base_bic = self.bic(_full_rss(rep, rep.baseline), 0)
 
         def qualify(r: Row) -> None:
@@ -425,7 +519,7 @@ class _Confirmation:
 
         for r in rows[1:]:
             qualify(r)
-        extra = [self.anchored(r, ref) for r in self.refined(sim, rows)]
+        extra = [r if "beds" in r else self.anchored(r, ref) for r in self.refined(sim, rows)]
         for r in extra:
             qualify(r)
         rows += extra
@@ -466,6 +560,14 @@ class _Confirmation:
         else:
             requests += self.levels(list(self.searched)) + self.replicate_requests()
         rows = self.run(sim, requests)
+        if tier is None and len(self.beds) > 1:
+            # bed 0's base: the baseline simulation aligned as every run is (as the screening
+            # aligned it when its raw channels are not at hand)
+            b0 = (self.row("baseline", {}, None, dict(self.baseline_signals))
+                  if self.baseline_signals is not None else
+                  {"hypothesis": "baseline", "aligned": rep.baseline})
+            self.set_beds(b0, rows, b0.get("aligned", rep.baseline))
+            rows = [rows[0]] + self.pooled(rows[1:])
         recal_row = rows[0]
         # reference: the better of the baseline simulation and the recalibrated full run
         base_row: Row = {"hypothesis": "baseline", "score": float(rep.fit["before"]["overall"]),
@@ -683,11 +785,13 @@ class _Confirmation:
             lv = [r for r in (tier.rows[1:] if tier is not None else rows) if "search_value" in r]
             rep.fit.setdefault("full_search", {}).update(
                 tier="search simulator" if tier is not None else "full simulator",
-                runs=len(lv) + (1 if tier is not None else 0),
+                runs=_n_runs(lv) + (1 if tier is not None else 0),
+                level_beds=len(self.beds),
                 levels=[{"hypothesis": r["hypothesis"], "value": r["search_value"],
                          "score": None if not math.isfinite(r["score"]) else r["score"],
                          "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
-                         "refined": bool(r.get("refined")), "located": self.located(r)}
+                         "refined": bool(r.get("refined")), "located": self.located(r),
+                         **({"beds": len(r["beds"])} if "beds" in r else {})}
                         for r in lv],
                 best={n: {"value": r["search_value"], "score": r["score"],
                           "delta_bic_vs_reference": r["delta_bic_vs_reference"]}
@@ -698,7 +802,7 @@ class _Confirmation:
                 if d.contested is not None and d.ambiguous[1] in tier.verdicts:
                     tier.verdicts[d.ambiguous[1]] += "; " + _contested_verdict(
                         d.ambiguous[1], d.ambiguous, d.contested)
-                rep.simulations["search_simulations"] = len(tier.rows)
+                rep.simulations["search_simulations"] = _n_runs(tier.rows)
         rep.fit["confirmation"] = [{k: (None if k == "score" and not math.isfinite(v) else v)
                                     for k, v in r.items() if k != "aligned"} for r in rows]
         rep.fit["confirmation_reference_score"] = full.reference
@@ -707,7 +811,7 @@ class _Confirmation:
             rep.fit["after_full"] = {"hypothesis": d.confirmed, "overall": d.best["score"],
                                      "per_channel": d.best["per_channel"]}
             rep.refitted = dict(d.best["aligned"])
-        rep.simulations["full_simulations"] = len(rows)
+        rep.simulations["full_simulations"] = _n_runs(rows)
         rep.simulations["full_wall_time_s"] = t_full
         rep.missing_physics = d.confirmed
         self.settle(d)
@@ -869,12 +973,15 @@ class _Confirmation:
     def sentence(self, full: _FullTier, tier: _SearchTier | None, d: _Decision) -> str:
         """The confirmation's part of the report's decision line."""
         rows, searched, best, confirmed = full.rows, self.searched, d.best, d.confirmed
-        n_lv = sum("search_value" in r for r in rows)
+        n_lv = _n_runs(r for r in rows if "search_value" in r)
         if tier is not None:
-            how = (f"{len(rows)} runs, {n_lv} of them the best levels of a {len(tier.rows)}-run "
+            how = (f"{len(rows)} runs, {n_lv} of them the best levels of a {_n_runs(tier.rows)}-run "
                    f"search over {len(searched)} effects on the search simulator")
         elif searched:
-            how = f"{len(rows)} runs, {n_lv} of them a full-model search over {len(searched)} effects"
+            how = (f"{_n_runs(rows)} runs, {n_lv} of them a full-model search over "
+                   f"{len(searched)} effects")
+            if len(self.beds) > 1 and any("beds" in r for r in rows):
+                how += f" (deposited levels on {len(self.beds)} beds each)"
         else:
             how = f"{len(rows)} runs"
         at = (f" at {searched[confirmed].parameter} = {best['search_value']:.4g} "
@@ -898,6 +1005,11 @@ class _Confirmation:
                    if confirmed and best is not rows[0] else
                    f"{confirmed} confirmed (score {best['score']:.3f})" if confirmed
                    else "no missing physics confirmed"))
+
+
+def _n_runs(rows: Iterable[dict[str, Any]]) -> int:
+    """Simulations behind ``rows``: a pooled level counts its beds."""
+    return sum(len(r["beds"]) if "beds" in r else 1 for r in rows)
 
 
 def _run_full(full_simulator: Simulator, requests: list[tuple[str, dict[str, Any]]]) -> list[Any]:

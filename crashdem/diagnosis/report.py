@@ -152,9 +152,14 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         lines += [f"| {name} | {why} |" for name, why in verdicts.items()]
     search = fit.get("full_search")
     if search and search.get("levels"):
+        deposited = sorted({lv["hypothesis"] for lv in search["levels"] if lv.get("beds")})
+        beds = (f" Each level of {', '.join(deposited)} deposits its own bed, so it ran on "
+                f"{search.get('level_beds')} beds (the baseline's packing and the replicates') "
+                "and stands for the mean of its changes against the baseline of each bed."
+                if deposited else "")
         lines += ["", f"Full-model search ({search.get('tier')}, {search.get('runs')} runs): best "
                   "level of each effect (a level at the end where the effect fades names "
-                  "nothing).", "", "| effect | best level | score | Delta BIC vs reference |",
+                  f"nothing).{beds}", "", "| effect | best level | score | Delta BIC vs reference |",
                   "|---|---|---|---|"]
         for name, b in (search.get("best") or {}).items():
             lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
