@@ -144,8 +144,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each search level of an effect that deposits its own bed (floor, "
                         "interface depth) on N beds: the baseline's packing and the first N - 1 "
                         "replicates', each taken against the baseline run of its bed, and "
-                        "average the changes (default 5, at most 1 + --replicates; 1 = one bed "
-                        "per level)")
+                        "average the changes (default 5 when the search runs on the scenario "
+                        "itself, 1 on the coarse search tier; at most 1 + --replicates)")
     d.add_argument("--numerics-check", default=None, metavar="F[,F...]|off",
                    help="rerun a named soil effect's search levels with the grain radius times "
                         "each factor and widen its uncertainty to how far the value moves "

@@ -408,13 +408,13 @@ def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
     return replicate_overrides(scen.get("scenario.seed"), n)
 
 
-def _level_beds(n: int | None) -> int:
-    """``--level-beds``: beds per search level of a deposited effect (default
-    ``confirm.LEVEL_BEDS``; used up to 1 + the number of replicates)."""
-    from crashdem.diagnosis.confirm import LEVEL_BEDS
-
+def _level_beds(n: int | None) -> int | None:
+    """``--level-beds``: beds per search level of a deposited effect (None: the default of
+    ``screen_then_confirm``, ``confirm.LEVEL_BEDS`` when the search runs on the scenario
+    itself, ``confirm.SEARCH_TIER_LEVEL_BEDS`` on the coarse search tier; used up to 1 + the
+    number of replicates)."""
     if n is None:
-        return LEVEL_BEDS
+        return None
     if not 1 <= n <= 33:
         raise ValueError(f"--level-beds={n!r}: must be in [1, 33] (beds per search level of a "
                          "floor or interface depth; 1 = one bed)")

@@ -41,7 +41,7 @@ from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
            "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
-           "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS"]
+           "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS", "SEARCH_TIER_LEVEL_BEDS"]
 
 #: a full simulation must raise the overall score over the baseline by this much to confirm
 CONFIRM_MIN_GAIN = 0.02
@@ -87,6 +87,14 @@ NUMERICS_RADIUS_SCALES = (0.9, 1.1)
 #: per level left the level-to-level packing scatter (measured +-10-15 Delta BIC on the small
 #: bed, docs/diagnosis.md) above the replicates' ambiguity margin
 LEVEL_BEDS = 5
+#: the same on a separate (coarser) search simulator, where the default stays one bed per level.
+#: Measured on the default CLI path (13.7 m Yade recordings, 0.075 m grains in a 2 m tank, the
+#: search at 0.10 m): with 5 beds the coarse floor levels at 0.6-0.7 m rose above the coarse
+#: replicates (Delta BIC 38-41 against 26-36) on both the floor recording 12 (0.764 m: named at
+#: 0.6 m, -21 %) and the layering recording 11 (0.325 m, E x7.3: named a floor at 0.6 m, wrong),
+#: and the full-resolution run that confirms a promoted level has no replicate floor of its own;
+#: with one bed both name nothing, as before
+SEARCH_TIER_LEVEL_BEDS = 1
 
 Row = dict[str, Any]
 Request = tuple[str, dict[str, Any], "float | None"]
@@ -105,7 +113,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         search_simulator: Simulator | None = None,
                         replicates: Sequence[Mapping[str, Any]] = (),
                         numerics: Sequence[float] = NUMERICS_RADIUS_SCALES,
-                        level_beds: int = LEVEL_BEDS,
+                        level_beds: int | None = None,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -144,7 +152,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         least how far the value each profile locates lies from the one at the simulation's own
         grains (``hypotheses[*].full_model.numerics``, ``fit.full_search.named.numerics``)
     level_beds : beds per search level of an effect whose levels deposit their own bed
-        (``FullSearch.deposits``; at most 1 + the number of replicates, ``LEVEL_BEDS``): bed
+        (``FullSearch.deposits``; at most 1 + the number of replicates; default
+        ``LEVEL_BEDS``, or ``SEARCH_TIER_LEVEL_BEDS`` with a ``search_simulator``): bed
         0 is the level with the baseline's packing seed, bed j the level with replicate j's
         overrides. The level's prediction is the baseline plus the mean over its beds of the
         run's change against the baseline run of the same bed (the baseline, replicate j), so
@@ -172,6 +181,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     parameter (``hypotheses[*].full_model``; it replaces the screening's value when both mean
     the same, e.g. a floor or interface depth).
     """
+    if level_beds is None:
+        level_beds = SEARCH_TIER_LEVEL_BEDS if search_simulator is not None else LEVEL_BEDS
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
         raise ValueError(f"level_beds={level_beds!r}: must be an integer >= 1 (beds per search "
                          "level of an effect that deposits its own bed)")

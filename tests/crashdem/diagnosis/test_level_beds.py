@@ -178,15 +178,41 @@ def test_level_beds_is_checked(case, bad):
 
 
 def test_command_line_level_beds():
-    """``crashdem diagnose --level-beds N``: parsed, defaulting to ``LEVEL_BEDS``; outside
-    [1, 33] an error naming the option and its range."""
+    """``crashdem diagnose --level-beds N``: parsed; without it ``screen_then_confirm``'s
+    default (None); outside [1, 33] an error naming the option and its range."""
     from crashdem.cli import build_parser
     from crashdem.diagnosis.cli import _level_beds
 
     base = ["diagnose", "--scenario", "s.toml", "--recording", "r.csv", "--out", "o"]
     assert build_parser().parse_args(base).level_beds is None
     assert build_parser().parse_args(base + ["--level-beds", "2"]).level_beds == 2
-    assert _level_beds(None) == cf.LEVEL_BEDS and _level_beds(1) == 1
+    assert _level_beds(None) is None and _level_beds(1) == 1
     for bad in (0, 34):
         with pytest.raises(ValueError, match=rf"--level-beds={bad}: must be in \[1, 33\]"):
             _level_beds(bad)
+
+
+def test_default_beds_depend_on_where_the_search_runs(case):
+    """By default a deposited level runs on ``LEVEL_BEDS`` beds (at most 1 + replicates) when
+    the search runs on the full simulator, and on ``SEARCH_TIER_LEVEL_BEDS`` (one) on a
+    separate search simulator; given explicitly, ``level_beds`` holds on either."""
+    from tests.crashdem.diagnosis.test_report_confirm import _scenario_rom_simulator
+
+    assert cf.SEARCH_TIER_LEVEL_BEDS == 1 < cf.LEVEL_BEDS
+    reps = [{"scenario.seed": s} for s in range(2, 2 + cf.LEVEL_BEDS + 1)]
+
+    def level_seeds(calls):
+        return [c["scenario.seed"] for c in calls if "scenario.seed" in c
+                and any(k.startswith("physics.") for k in c)]
+
+    for search, beds, want in ((False, None, cf.LEVEL_BEDS), (True, None, 1), (True, 2, 2)):
+        full_calls: list = []
+        search_calls: list = []
+        kw = {"search_simulator": _scenario_rom_simulator(search_calls)} if search else {}
+        rep = screen_then_confirm(simulate(RomParams()), case.recording,
+                                  _scenario_rom_simulator(full_calls), top_k=2, replicates=reps,
+                                  level_beds=beds, numerics=(), **kw)
+        assert rep.fit["full_search"]["level_beds"] == want
+        seeds = set(level_seeds(search_calls if search else full_calls))
+        assert seeds == {r["scenario.seed"] for r in reps[:want - 1]}
+        assert not level_seeds(full_calls if search else search_calls)

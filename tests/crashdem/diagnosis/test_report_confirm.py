@@ -322,7 +322,8 @@ def test_replicates_run_on_the_search_simulator(layering_case):
                               search_simulator=_scenario_rom_simulator(search_calls),
                               replicates=reps)
     assert len(full_calls) == rep.simulations["full_simulations"] <= 3
-    # the replicates (the deposited levels also run on their packings: test_level_beds.py)
+    # the replicates (on a search simulator a deposited level runs on one bed by default:
+    # test_level_beds.py)
     assert [c for c in search_calls if "scenario.seed" in c
             and not any(k.startswith("physics.") for k in c)] == reps
     assert not any("scenario.seed" in c for c in full_calls)
