@@ -577,7 +577,7 @@ class _Confirmation:
             b0 = (self.row("baseline", {}, None, dict(self.baseline_signals))
                   if self.baseline_signals is not None else
                   {"hypothesis": "baseline", "aligned": rep.baseline})
-            self.set_beds(b0, rows, b0.get("aligned", rep.baseline))
+            self.set_beds(b0, rows, b0["aligned"])
             rows = [rows[0]] + self.pooled(rows[1:])
         recal_row = rows[0]
         # reference: the better of the baseline simulation and the recalibrated full run

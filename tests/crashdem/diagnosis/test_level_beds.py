@@ -105,23 +105,24 @@ def test_pooling_removes_the_packing_of_each_level(report):
     effect = _sig(rep, rng, 3.0)  # the level's true response
     base = {ch: s for ch, s in rep.baseline.items()}
     err: dict[int, list[float]] = {1: [], 4: []}
+    c = _conf(rep, 4)
+
+    def mse(got):
+        return np.mean([np.mean((got[ch].data - effect[ch].data) ** 2) for ch in rep.channels])
+
     for _ in range(40):
         def pack(sig):  # one packing realisation on top of a true response
             return {ch: Signal(ch, s.t, s.data + rng.standard_normal(s.t.size), s.unit, s.cfc)
                     for ch, s in sig.items()}
         bases = [pack(base) for _ in range(4)]
         runs = [pack(effect) for _ in range(4)]
-        for n in err:
-            c = _conf(rep, n)
-            c.set_beds({"hypothesis": "baseline", "aligned": bases[0]},
-                       [{"hypothesis": cf.REPLICATE, "aligned": b} for b in bases[1:]], base)
-            rows = [{"hypothesis": "soil_layering", "overrides": {}, "search_value": 0.3,
-                     "score": 0.0, "aligned": r} for r in runs[:n]]
-            got = c.pooled(rows)[0]["aligned"] if n > 1 else {
-                ch: Signal(ch, base[ch].t, base[ch].data + runs[0][ch].data - bases[0][ch].data,
-                           "", None) for ch in base}
-            err[n].append(np.mean([np.mean((got[ch].data - effect[ch].data) ** 2)
-                                   for ch in rep.channels]))
+        base0 = {"hypothesis": "baseline", "aligned": bases[0]}
+        c.set_beds(base0, [{"hypothesis": cf.REPLICATE, "aligned": b} for b in bases[1:]], base)
+        rows = [{"hypothesis": "soil_layering", "overrides": {}, "search_value": 0.3,
+                 "score": 0.0, "aligned": r} for r in runs]
+        # one bed: the level anchored on the baseline as a single run is (``anchored``)
+        err[1].append(mse(c.anchored(rows[0], base0)["aligned"]))
+        err[4].append(mse(c.pooled(rows)[0]["aligned"]))
     # one bed: run and base each carry one realisation (variance 2); four beds: 2 / 4
     assert np.mean(err[1]) == pytest.approx(2.0, rel=0.1)
     assert np.mean(err[4]) == pytest.approx(0.5, rel=0.1)
