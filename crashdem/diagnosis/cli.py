@@ -450,6 +450,50 @@ SEARCH_COARSE: dict[str, Any] = {"soil.radius": 0.10, "soil.radius_spread": 0.10
                                  "container.diameter": 2.0, "container.length": 2.0,
                                  "container.width": 2.0}
 
+#: ``--full-search auto`` also searches on a scenario finer than ``SEARCH_COARSE`` itself when
+#: one impact costs at most as much as one in a bed of this many grains of the campaign soil at
+#: 0.075 m and safety 0.3 (``search_load``): there the whole search, its deposited levels on 5
+#: beds each, fits the budget. Measured (session 17, 2-core VM, cold): 0.075 m grains in the 2 m
+#: tank (load 2,051; 1,613 grains deposited) 263-298 s and 73-79 full runs per diagnosis, 491 s
+#: at most (a refinement on 5 beds), so about 10 min at most at the gate; the same tank with the
+#: campaign's 1 m compacted layer (E x 3: 3,553) and the 6 m tank (18,462; 16,336 deposited)
+#: stay on the coarse tier
+AUTO_FULL_LOAD = 2500
+#: the solid fraction ``bed_grains`` assumes (deposited beds: 0.55-0.6)
+BED_SOLID_FRACTION = 0.6
+#: the DEM step of the bed ``AUTO_FULL_LOAD`` counts in: safety 0.3 x the P-wave step of the
+#: campaign soil's smallest grain (0.075 m, spread 0.2: 0.06 m; E = 2.0e7 Pa, 2650 kg/m^3)
+_LOAD_REFERENCE_STEP = 0.3 * 0.06 / math.sqrt(2.0e7 / 2650.0)
+
+
+def bed_grains(scen) -> float:
+    """Estimated number of grains in the scenario's bed: ``BED_SOLID_FRACTION`` x the bed's
+    volume (container cross-section x soil depth, or the floor depth of a switched-on
+    ``boundary_proximity``) / the mean grain volume of its radius distribution. Deterministic
+    (no deposition); it does not undercount: the 2 m and 6 m tanks at 0.075 m deposit 79 % and
+    88 % of it."""
+    from crashdem.run import packing_spec
+
+    spec = packing_spec(scen)
+    depth = sum(layer.thickness for layer in spec.layers)
+    return BED_SOLID_FRACTION * spec.container.area * depth / spec.radius.mean_volume
+
+
+def search_load(scen) -> float:
+    """The cost of one impact of the scenario in grains of the reference bed
+    (``_LOAD_REFERENCE_STEP``): ``bed_grains`` x the reference step / the scenario's step. The
+    step is ``solver.dt``, else ``solver.safety`` x the P-wave step of the smallest grain in the
+    stiffest soil material (``soil.timestep.pwave_time_step``; a run's critical step is that or
+    the contact-stiffness step, which scales the same way)."""
+    from crashdem.run import packing_spec
+
+    spec = packing_spec(scen)
+    dt = scen.get("solver.dt")
+    if dt is None:
+        wave = max(math.sqrt(m.young / m.density) for m in spec.materials)
+        dt = scen.get("solver.safety") * spec.radius.r_min / wave
+    return bed_grains(scen) * _LOAD_REFERENCE_STEP / dt
+
 
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                   ) -> tuple[dict[str, Any], Any, str]:
@@ -458,10 +502,12 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     on), the simulator it runs on (None: the full simulator) and a one-line description.
 
     ``auto`` (default) searches on the scenario itself when it is no finer than the coarse
-    resolution (``SEARCH_COARSE``), else on the scenario at that resolution, whose best levels
+    resolution (``SEARCH_COARSE``) or when its impacts are cheap (``search_load`` at most
+    ``AUTO_FULL_LOAD``), else on the scenario at the coarse resolution, whose best levels
     are then confirmed at the scenario's own (``screen_then_confirm``'s ``search_simulator``;
-    22 coarse runs instead of 22 full ones: at the default resolution one full run takes about
-    two minutes); ``full`` always on the scenario; ``coarse`` always coarse; ``off`` none."""
+    coarse runs instead of full ones: at the default resolution, 16,300 grains, one full run
+    takes about two minutes); ``full`` always on the scenario; ``coarse`` always coarse;
+    ``off`` none."""
     from crashdem.diagnosis.catalogue import DROP
 
     if mode not in ("auto", "full", "coarse", "off"):
@@ -485,6 +531,10 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
              or size > SEARCH_COARSE["container.diameter"] * 1.001)
     if mode == "full" or (mode == "auto" and not finer):
         return searched, None, f"{len(searched)} effects on the scenario itself"
+    if mode == "auto" and search_load(scen) <= AUTO_FULL_LOAD:
+        return searched, None, (f"{len(searched)} effects on the scenario itself (a small bed: "
+                                f"about {bed_grains(scen):,.0f} grains, load "
+                                f"{search_load(scen):,.0f} <= {AUTO_FULL_LOAD:,})")
     keep = ("container.length", "container.width") if box else ("container.diameter",)
     coarse = {k: v for k, v in SEARCH_COARSE.items()
               if not k.startswith("container.") or k in keep}

@@ -1190,3 +1190,73 @@ def test_grain_radius_factor_of_the_numerics_check(tmp_path):
         _numerics_scales("0.9,x")
     with pytest.raises(ValueError, match=r"--numerics-check='0.3'.*factor 0.3 is outside"):
         _numerics_scales("0.3")
+
+
+def test_auto_search_runs_on_a_small_bed_itself(tmp_path):
+    """``--full-search auto``: a scenario finer than the coarse tier is searched on itself when
+    its impacts are cheap (``search_load`` at most ``AUTO_FULL_LOAD``) and on the coarse tier
+    otherwise; ``full`` and ``coarse`` are not affected. ``bed_grains`` is the solid fraction
+    x bed volume / mean grain volume (checked against the formula), and it does not undercount
+    a deposited bed (the gate's cost would then be more than it says): a 0.8 m tank at 0.05 m
+    grains deposits 70 % of it (the wall's loose band is widest there; the 2 m and 6 m tanks at
+    0.075 m: 79 % and 88 %), asserted 60-100 %. ``search_load`` counts the grains in steps of
+    the campaign bed: it scales with 1 / safety, 1 / the smallest radius and sqrt(E / rho) of
+    the stiffest soil, or with 1 / an explicit step."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from soil import packing as pk
+
+    from crashdem.diagnosis.cli import (AUTO_FULL_LOAD, BED_SOLID_FRACTION, _search_setup,
+                                        bed_grains, search_load)
+    from crashdem.diagnosis.generator_dem import scenario_path
+    from crashdem.run import packing_spec
+
+    campaign = scenario.load(scenario_path()).with_overrides(
+        {"physics.soil_layering.enabled": False})
+    r = campaign.get("soil.radius")
+    assert r == 0.075 and campaign.get("container.diameter") == 6.0
+    lo, hi = r * (1 - campaign.get("soil.radius_spread")), r * (1 + campaign.get("soil.radius_spread"))
+    grain = 4 / 3 * math.pi * (hi**4 - lo**4) / (4 * (hi - lo))
+    for diameter, coarse in ((6.0, True), (3.0, True), (2.0, False)):
+        scen = campaign.with_overrides({"container.diameter": diameter})
+        n = bed_grains(scen)
+        expect = BED_SOLID_FRACTION * math.pi * diameter**2 / 4 * campaign.get(
+            "container.soil_depth") / grain
+        assert n == pytest.approx(expect, rel=1e-12)
+        assert search_load(scen) == pytest.approx(n, rel=1e-12)  # the reference soil and step
+        assert (search_load(scen) > AUTO_FULL_LOAD) is coarse
+        _, sim, how = _search_setup(scen, False, "auto", {}, tmp_path / str(diameter))
+        assert (sim is not None) is coarse, (diameter, how)
+        assert ("coarse" in how) is coarse and ("small bed" in how) is (not coarse)
+        assert _search_setup(scen, False, "full", {}, tmp_path)[1] is None
+        assert _search_setup(scen, False, "coarse", {}, tmp_path / "c")[1] is not None
+    small = campaign.with_overrides({"container.diameter": 2.0})
+    n = bed_grains(small)
+    # what makes a step shorter makes the load larger, by its factor
+    for ov, factor in (({"solver.safety": 0.1}, 3.0),
+                       ({"soil.material.young": 8.0e7}, 2.0),
+                       ({"physics.soil_layering.enabled": True,
+                         "physics.soil_layering.lower_young_factor": 4.0}, 2.0)):
+        assert search_load(small.with_overrides(ov)) == pytest.approx(n * factor, rel=1e-9), ov
+    # the campaign's own 1 m compacted layer (E x 3) makes the 2 m tank's steps sqrt(3) shorter
+    layered = scenario.load(scenario_path()).with_overrides({"container.diameter": 2.0})
+    assert search_load(layered) == pytest.approx(n * math.sqrt(3.0), rel=1e-9)
+    assert search_load(layered) > AUTO_FULL_LOAD
+    dt_ref = 0.3 * 0.06 / math.sqrt(2.0e7 / 2650.0)
+    assert search_load(small.with_overrides({"solver.dt": dt_ref / 5})) == pytest.approx(5 * n)
+    assert _search_setup(small.with_overrides({"solver.safety": 0.1}), False, "auto", {},
+                         tmp_path / "safety")[1] is not None  # 3 x the load: coarse
+    # a floor ends the bed: fewer grains
+    floor = small.with_overrides({"physics.boundary_proximity.enabled": True,
+                                  "physics.boundary_proximity.floor_depth": 0.5})
+    assert bed_grains(floor) == pytest.approx(n * 0.5 / 2.0)
+
+    from crashdem.cli import build_parser
+
+    diag = next(a for a in build_parser()._subparsers._group_actions[0].choices["diagnose"]._actions
+                if "--full-search" in a.option_strings)
+    assert f"about {AUTO_FULL_LOAD:,} grains" in diag.help  # the help states the gate
+    # against a deposited bed (a small one)
+    tiny = campaign.with_overrides({"container.diameter": 0.8, "container.soil_depth": 0.4,
+                                    "soil.radius": 0.05, "scenario.threads": 1})
+    packed = pk.build(packing_spec(tiny))
+    assert 0.6 * bed_grains(tiny) <= len(packed.radius) <= bed_grains(tiny)
