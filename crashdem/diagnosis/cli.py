@@ -483,8 +483,8 @@ def search_load(scen) -> float:
     """The cost of one impact of the scenario in grains of the reference bed
     (``_LOAD_REFERENCE_STEP``): ``bed_grains`` x the reference step / the scenario's step. The
     step is ``solver.dt``, else ``solver.safety`` x the P-wave step of the smallest grain in the
-    stiffest soil material (``soil.timestep.pwave_time_step``; a run's critical step is that or
-    the contact-stiffness step, which scales the same way)."""
+    stiffest soil material, r / sqrt(E / rho) (the formula of ``soil.timestep.pwave_time_step``;
+    a run's critical step is that or the contact-stiffness step, which scales the same way)."""
     from crashdem.run import packing_spec
 
     spec = packing_spec(scen)
