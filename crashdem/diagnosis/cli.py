@@ -461,9 +461,14 @@ SEARCH_COARSE: dict[str, Any] = {"soil.radius": 0.10, "soil.radius_spread": 0.10
 AUTO_FULL_LOAD = 2500
 #: the solid fraction ``bed_grains`` assumes (deposited beds: 0.55-0.6)
 BED_SOLID_FRACTION = 0.6
-#: the DEM step of the bed ``AUTO_FULL_LOAD`` counts in: safety 0.3 x the P-wave step of the
-#: campaign soil's smallest grain (0.075 m, spread 0.2: 0.06 m; E = 2.0e7 Pa, 2650 kg/m^3)
-_LOAD_REFERENCE_STEP = 0.3 * 0.06 / math.sqrt(2.0e7 / 2650.0)
+#: the grain ``AUTO_FULL_LOAD`` counts in: the campaign soil's smallest grain (0.075 m,
+#: spread 0.2: 0.06 m; E = 2.0e7 Pa, 2650 kg/m^3) at safety 0.3, whose DEM step is the reference
+_LOAD_REFERENCE = {"radius": 0.06, "young": 2.0e7, "density": 2650.0, "safety": 0.3}
+
+
+def _bed_grains(spec) -> float:
+    depth = sum(layer.thickness for layer in spec.layers)
+    return BED_SOLID_FRACTION * spec.container.area * depth / spec.radius.mean_volume
 
 
 def bed_grains(scen) -> float:
@@ -474,25 +479,30 @@ def bed_grains(scen) -> float:
     88 % of it."""
     from crashdem.run import packing_spec
 
-    spec = packing_spec(scen)
-    depth = sum(layer.thickness for layer in spec.layers)
-    return BED_SOLID_FRACTION * spec.container.area * depth / spec.radius.mean_volume
+    return _bed_grains(packing_spec(scen))
 
 
 def search_load(scen) -> float:
     """The cost of one impact of the scenario in grains of the reference bed
-    (``_LOAD_REFERENCE_STEP``): ``bed_grains`` x the reference step / the scenario's step. The
-    step is ``solver.dt``, else ``solver.safety`` x the P-wave step of the smallest grain in the
-    stiffest soil material, r / sqrt(E / rho) (the formula of ``soil.timestep.pwave_time_step``;
-    a run's critical step is that or the contact-stiffness step, which scales the same way)."""
+    (``_LOAD_REFERENCE``): ``bed_grains`` x the reference step / the scenario's step. The step
+    is ``solver.dt``, else ``solver.safety`` x the P-wave step
+    (``soil.timestep.pwave_time_step``) of the smallest grain in the stiffest soil material (a
+    run's critical step is that or the contact-stiffness step, which scales the same way)."""
+    from soil.timestep import pwave_time_step
+
     from crashdem.run import packing_spec
 
+    ref = _LOAD_REFERENCE
+    ref_dt = ref["safety"] * pwave_time_step(np.array([ref["radius"]]), np.array([ref["young"]]),
+                                             np.array([ref["density"]]))
     spec = packing_spec(scen)
     dt = scen.get("solver.dt")
     if dt is None:
-        wave = max(math.sqrt(m.young / m.density) for m in spec.materials)
-        dt = scen.get("solver.safety") * spec.radius.r_min / wave
-    return bed_grains(scen) * _LOAD_REFERENCE_STEP / dt
+        mats = spec.materials
+        dt = scen.get("solver.safety") * pwave_time_step(
+            np.full(len(mats), spec.radius.r_min), np.array([m.young for m in mats]),
+            np.array([m.density for m in mats]))
+    return _bed_grains(spec) * ref_dt / dt
 
 
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
@@ -531,10 +541,11 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
              or size > SEARCH_COARSE["container.diameter"] * 1.001)
     if mode == "full" or (mode == "auto" and not finer):
         return searched, None, f"{len(searched)} effects on the scenario itself"
-    if mode == "auto" and search_load(scen) <= AUTO_FULL_LOAD:
+    load = search_load(scen) if mode == "auto" else math.inf
+    if load <= AUTO_FULL_LOAD:
         return searched, None, (f"{len(searched)} effects on the scenario itself (a small bed: "
-                                f"about {bed_grains(scen):,.0f} grains, load "
-                                f"{search_load(scen):,.0f} <= {AUTO_FULL_LOAD:,})")
+                                f"about {bed_grains(scen):,.0f} grains, load {load:,.0f} <= "
+                                f"{AUTO_FULL_LOAD:,})")
     keep = ("container.length", "container.width") if box else ("container.diameter",)
     coarse = {k: v for k, v in SEARCH_COARSE.items()
               if not k.startswith("container.") or k in keep}

@@ -404,12 +404,9 @@ class _Confirmation:
             return {**out, "score": -math.inf,
                     "error": errs[0] if errs else "no bed of this level and its base ran"}
         base = self.bed_anchor
-        al = {ch: Signal(ch, base[ch].t, base[ch].data + np.mean(
-                  [r["aligned"][ch].data - b["aligned"][ch].data for r, b in pairs], axis=0),
-                  base[ch].unit, base[ch].cfc)
-              for ch in self.chans}
-        return {**out, **self.rated(al), "rss": _full_rss(self.rep, al),
-                "beds_pooled": len(pairs)}
+        return {**out, **self.rated_on(base, {ch: base[ch].data + np.mean(
+                    [r["aligned"][ch].data - b["aligned"][ch].data for r, b in pairs], axis=0)
+                    for ch in self.chans}), "beds_pooled": len(pairs)}
 
     def set_beds(self, base0: Row, rows: Iterable[Row], anchor: Mapping[str, Signal]) -> None:
         """The bases of the beds: ``base0`` (the baseline run of the simulator the levels run
@@ -479,10 +476,16 @@ class _Confirmation:
         if "aligned" not in r or "aligned" not in ref:
             return r
         base = self.rep.baseline
-        al = {ch: Signal(ch, base[ch].t, base[ch].data + r["aligned"][ch].data
-                         - ref["aligned"][ch].data, base[ch].unit, base[ch].cfc)
+        return {**r, **self.rated_on(base, {ch: base[ch].data + r["aligned"][ch].data
+                                            - ref["aligned"][ch].data for ch in self.chans}),
+                "anchored": True}
+
+    def rated_on(self, base: Mapping[str, Signal], data: Mapping[str, np.ndarray]) -> Row:
+        """``rated`` and ``rss`` of a prediction ``data`` per channel on the time axes (units,
+        classes) of ``base``: an anchored run or a pooled level."""
+        al = {ch: Signal(ch, base[ch].t, data[ch], base[ch].unit, base[ch].cfc)
               for ch in self.chans}
-        return {**r, **self.rated(al), "anchored": True, "rss": _full_rss(self.rep, al)}
+        return {**self.rated(al), "rss": _full_rss(self.rep, al)}
 
     def refined(self, sim: Simulator, rows: list[Row]) -> list[Row]:
         """One run of the leading searched effect at the vertex of the parabola through its
