@@ -151,6 +151,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rerun a named soil effect's search levels with the grain radius times "
                         "each factor and widen its uncertainty to how far the value moves "
                         "(default 0.9,1.1; off = none)")
+    d.add_argument("--packing-cache", default=None, metavar="DIR|off",
+                   help="deposit the beds of the baseline, search and confirmation runs in this "
+                        "cache, shared by later diagnoses (default: $CRASHDEM_CACHE/packings or "
+                        "~/.cache/crashdem/packings; beds are kept under the soil engine's code "
+                        "fingerprint and found by their spec's hash, so the results are the same "
+                        "as with fresh beds); off = in OUT only")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

@@ -375,8 +375,6 @@ class RunMember:
             raise ValueError(f"RunMember.threads={self.threads!r}: must be an int >= 0 or None")
 
     def __call__(self, member: Member, path: Path) -> None:
-        import fcntl
-
         from crashdem.run import packing_spec, run_scenario
         from soil import packing as pk
 
@@ -392,10 +390,8 @@ class RunMember:
         run_dir = path.parent
         cache = run_dir / "packings"
         cache.mkdir(parents=True, exist_ok=True)
-        spec = packing_spec(scen)
-        with open(cache / f"packing-{spec.hash()[:20]}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
-            pk.cached(spec, cache)
+        # deposited once per bed when members share the cache (``soil.packing.cached`` locks it)
+        pk.cached(packing_spec(scen), cache)
         out = run_scenario(scen, out_dir=run_dir, progress=False, plots=False)
         os.replace(out, path)
 

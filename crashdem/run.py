@@ -343,6 +343,20 @@ def default_output(scen: Scenario, out_dir: str | os.PathLike | None) -> Path:
 LEDGER_EVERY = 10
 
 
+def packing_cache(root: str | os.PathLike | None = None) -> Path:
+    """A packing cache shared by runs of several commands (``crashdem diagnose
+    --packing-cache``): ``<root>/<engine fingerprint>``, root defaulting to
+    ``$CRASHDEM_CACHE/packings`` or ``~/.cache/crashdem/packings``. The fingerprint
+    (``soil.packing.code_fingerprint``) changes with the soil engine's code and the numpy and
+    numba versions, so a bed is only reused by the engine that deposited it; within one, the
+    file name is the spec's hash. Nothing is created here."""
+    from soil.packing import code_fingerprint
+
+    if root is None:
+        root = Path(os.environ.get("CRASHDEM_CACHE") or "~/.cache/crashdem") / "packings"
+    return Path(root).expanduser().absolute() / code_fingerprint()
+
+
 def share_packings(run_dir: str | os.PathLike, cache: str | os.PathLike) -> None:
     """Let the runs written to ``run_dir`` reuse (and add to) the deposited beds in ``cache``:
     ``run_scenario`` caches its packings in ``<out_dir>/packings``, which becomes a link to

@@ -17,6 +17,7 @@ Every length is in m, every angle in rad, forces in N.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import hashlib
@@ -1500,13 +1501,64 @@ def load_packing(path, verify: bool = True) -> Packing:
     return Packing.load(path, verify)
 
 
+def code_fingerprint() -> str:
+    """16 hex digits that change whenever a bed deposited from the same spec could differ: the
+    bytes of every module of the ``soil`` package (the deposition and the contact kernels it
+    runs), ``FORMAT_VERSION`` and the numpy and numba versions (the compiled kernels' floating
+    point). A cache shared across installs or versions (``crashdem diagnose --packing-cache``)
+    keeps its beds under this name, so that a changed engine never reuses another engine's
+    beds; ``spec.hash()`` alone does not see code changes."""
+    h = hashlib.sha256()
+    h.update(json.dumps({"format": FORMAT_VERSION, "numpy": np.__version__,
+                         "numba": numba.__version__}, sort_keys=True).encode())
+    for f in sorted(Path(__file__).resolve().parent.glob("*.py")):
+        h.update(f.name.encode() + b"\0" + f.read_bytes() + b"\0")
+    return h.hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def _build_lock(path: Path):
+    """An exclusive ``flock`` on ``<path>.lock`` while the packing ``path`` is built, so that
+    processes (or threads) sharing a cache deposit each bed once: the others wait and then
+    load it. The lock file stays (removing it would race with a waiter). No lock without
+    ``fcntl`` (Windows): concurrent builders then deposit the same bed each, and the atomic
+    rename of :meth:`Packing.save` keeps the file whole."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not on Linux/macOS
+        yield
+        return
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(path.with_suffix(".lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)
+
+
+def _load_cached(path: Path, h: str) -> Packing | None:
+    if not path.exists():
+        return None
+    try:
+        pk = Packing.load(path)
+        if pk.spec.get("__hash__") == h:
+            return pk
+        warnings.warn(f"cached: {path} has another spec hash, rebuilding", RuntimeWarning, 3)
+    except ValueError as exc:
+        warnings.warn(f"cached: {exc}; rebuilding", RuntimeWarning, stacklevel=3)
+    return None
+
+
 def cached(
     spec: PackingSpec, directory: str | os.PathLike, rebuild: bool = False, progress=None
 ) -> Packing:
     """Return the packing of ``spec``, building and saving it only when not already cached.
 
     The file is ``<directory>/packing-<spec hash[:20]>.h5``; a file is reused only when its
-    stored spec hash equals ``spec.hash()`` and its content hash verifies.
+    stored spec hash equals ``spec.hash()`` and its content hash verifies. A build holds
+    ``packing-<hash>.lock`` (``_build_lock``), so concurrent callers sharing ``directory``
+    deposit the bed once.
 
     Parameters
     ----------
@@ -1520,16 +1572,14 @@ def cached(
     """
     h = spec.hash()
     path = Path(directory).expanduser() / f"packing-{h[:20]}.h5"
-    if path.exists() and not rebuild:
-        try:
-            pk = Packing.load(path)
-            if pk.spec.get("__hash__") == h:
-                return pk
-            warnings.warn(f"cached: {path} has another spec hash, rebuilding", RuntimeWarning, 2)
-        except ValueError as exc:
-            warnings.warn(f"cached: {exc}; rebuilding", RuntimeWarning, stacklevel=2)
-    pk = build(spec, progress=progress)
-    pk.save(path)
+    if not rebuild and (pk := _load_cached(path, h)) is not None:
+        return pk
+    with _build_lock(path):
+        # another process may have built it while this one waited for the lock
+        if not rebuild and (pk := _load_cached(path, h)) is not None:
+            return pk
+        pk = build(spec, progress=progress)
+        pk.save(path)
     return pk
 
 

@@ -3,6 +3,7 @@
 
     python validation/diagnose_cost.py                        # contact damping, e = 0.15
     python validation/diagnose_cost.py --effect initial_conditions --value -3.0
+    python validation/diagnose_cost.py --warm    # and again, with the beds of the first run
 
 Truth: ``validation/scenarios/drop_s2_h13p70.toml`` at its resolution (0.075 m grains, 6 m
 tank, the compacted layer below 1 m) with another packing seed (7), ``solver.safety`` 0.2
@@ -12,8 +13,12 @@ CSV. Then the command a user runs, ``crashdem diagnose --scenario drop_s2_h13p70
 --recording rec.csv --out DIR``, is run as a subprocess and timed: the baseline run (its
 deposition included), the screening, the coarse full-model search and the full-resolution
 confirmation runs on Dask. The truth run is cached (``~/.cache/crashdem/diagnosis_truth``);
-the diagnosis is not (a fresh ``DIR``). The LAST line is JSON: wall times, the answer, its
-parameters and the run counts.
+the diagnosis is not: a fresh ``DIR`` and a fresh, empty ``--packing-cache`` (``DIR/..``
+``/packing_cache``), so every bed is deposited, as on a user's first diagnosis. With
+``--warm`` the same command is then run again into another directory with that cache (a
+user's next recording of the same scenario: no bed deposited) and its answer is checked
+against the first's. The LAST line is JSON: wall times, the answer, its parameters and the
+run counts.
 """
 from __future__ import annotations
 
@@ -65,26 +70,52 @@ def truth_recording(effect: str, value: float, out: Path, threads: int) -> Path:
     return write_recording(out / "rec.csv", rec)
 
 
+def _timeless(x):
+    """``x`` (report JSON) without its wall times (keys ``wall_time_s``, ``*_wall_s``)."""
+    if isinstance(x, dict):
+        return {k: _timeless(v) for k, v in x.items()
+                if k != "wall_time_s" and not k.endswith("_wall_s")}
+    if isinstance(x, list):
+        return [_timeless(v) for v in x]
+    return x
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--effect", choices=sorted(EFFECT_KEYS), default="contact_damping")
     ap.add_argument("--value", type=float, default=0.15)
     ap.add_argument("--out", default="runs/diagnose_cost")
     ap.add_argument("--threads", type=int, default=2, help="threads of the truth run")
+    ap.add_argument("--warm", action="store_true",
+                    help="diagnose again with the packing cache the first diagnosis filled")
     args = ap.parse_args(argv)
     out = Path(args.out)
     t0 = time.perf_counter()
     rec = truth_recording(args.effect, args.value, out, args.threads)
     t_truth = time.perf_counter() - t0
-    diag = out / "diagnosis"
-    shutil.rmtree(diag, ignore_errors=True)
-    cmd = [sys.executable, "-m", "crashdem", "diagnose", "--scenario",
-           str(ROOT / "validation" / "scenarios" / "drop_s2_h13p70.toml"),
-           "--recording", str(rec), "--out", str(diag)]
-    t1 = time.perf_counter()
-    subprocess.run(cmd, check=True)
-    wall = time.perf_counter() - t1
-    rep = json.loads((diag / "report.json").read_text())
+    cache = out / "packing_cache"
+    shutil.rmtree(cache, ignore_errors=True)
+
+    def diagnose(diag: Path) -> tuple[float, dict]:
+        shutil.rmtree(diag, ignore_errors=True)
+        cmd = [sys.executable, "-m", "crashdem", "diagnose", "--scenario",
+               str(ROOT / "validation" / "scenarios" / "drop_s2_h13p70.toml"),
+               "--recording", str(rec), "--out", str(diag), "--packing-cache", str(cache)]
+        t1 = time.perf_counter()
+        subprocess.run(cmd, check=True)
+        return time.perf_counter() - t1, json.loads((diag / "report.json").read_text())
+
+    wall, rep = diagnose(out / "diagnosis")
+    warm = None
+    if args.warm:
+        wall_w, rep_w = diagnose(out / "diagnosis_warm")
+        same = (rep_w["missing_physics"] == rep["missing_physics"]
+                and _timeless(rep_w["hypotheses"]) == _timeless(rep["hypotheses"])
+                and rep_w["fit"]["before"] == rep["fit"]["before"])
+        warm = {"diagnosis_wall_s": wall_w, "same_report": same,
+                "beds_deposited": rep_w["simulations"]["packing_cache"]["beds_deposited"]}
+        print(f"again with the cached beds: {wall_w:.0f} s ({warm['beds_deposited']} beds "
+              f"deposited), {'the same' if same else 'ANOTHER'} answer and hypotheses")
     named = next((h for h in rep["hypotheses"] if h["name"] == rep["missing_physics"]), None)
     row = {"truth": args.effect, "value": args.value, "claimed": rep["missing_physics"],
            "parameters": named["parameters"] if named else None,
@@ -92,7 +123,8 @@ def main(argv=None) -> int:
            "score_after": (rep["fit"].get("after_full") or rep["fit"]["after"])["overall"],
            "full_simulations": rep["simulations"]["full_simulations"],
            "search_simulations": rep["simulations"].get("search_simulations"),
-           "diagnosis_wall_s": wall, "truth_wall_s": t_truth, "decision": rep["decision"]}
+           "diagnosis_wall_s": wall, "truth_wall_s": t_truth, "decision": rep["decision"],
+           "beds_deposited": rep["simulations"]["packing_cache"]["beds_deposited"], "warm": warm}
     print(f"diagnosis of a default-resolution recording: {wall:.0f} s "
           f"({'within' if wall <= 900 else 'OVER'} the 15 min budget); claimed "
           f"{row['claimed']} {row['parameters']}; full runs {row['full_simulations']}, search "

@@ -334,9 +334,13 @@ def _diagnose_command(args: argparse.Namespace) -> int:
     settings = RomSettings(t_pre=max(0.0, -float(first.t[0])) + 0.005,
                            t_end=float(first.t[-1]) + 0.01, sample_rate=first.fs,
                            cfc=first.cfc if first.cfc is not None else scen.get("instrumentation.cfc"))
+    pcache = _packing_cache(getattr(args, "packing_cache", None))
+    # the beds already in each directory runs deposit in (the count of report.json)
+    own = (pcache if pcache is not None else Path(args.out) / "baseline" / "packings").resolve()
+    beds_before = {own: _cached_beds(own)}
     baseline, source = _baseline(scen, cmap, base_params, settings,
                                  mode=getattr(args, "baseline", None) or "run",
-                                 out_dir=Path(args.out))
+                                 out_dir=Path(args.out), packing_cache=pcache)
     # unfiltered baseline channels, to compare at a recording's other filter class
     base_raw = (_simulate(base_params, replace(settings, cfc=None)) if source == "rom"
                 else _baseline_raw(source, cmap))
@@ -350,17 +354,21 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         raise ValueError(f"--full-confirm={n_full!r}: must be >= 0 (0 = screening only)")
     if n_full:
         dask = getattr(args, "workers", None) != 0
-        _share_packings(source, [Path(args.out) / ("confirmation.h5.members" if dask
-                                                   else "full_runs")])
+        linked = _share_packings(source, [Path(args.out) / ("confirmation.h5.members" if dask
+                                                            else "full_runs")], pcache)
+        if linked is not None and linked not in beds_before:  # a result's own beds
+            beds_before[linked] = _cached_beds(linked)
         full = _local_runner(scen, cmap, Path(args.out) / "full_runs")
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
             from crashdem.diagnosis.distributed import full_simulator_from_args
 
             local = full
             full = _LocalFallback(full_simulator_from_args(args, scen, cmap), local,  # type: ignore[assignment]
-                                  lambda: _share_packings(source, [Path(args.out) / "full_runs"]))
+                                  lambda: _share_packings(source, [Path(args.out) / "full_runs"],
+                                                          pcache))
         searched, search_sim, search_how = _search_setup(
-            scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out))
+            scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out),
+            packing_cache=pcache)
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
@@ -376,6 +384,10 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
                        baseline_raw=base_raw, **cat_kw)
     rep.simulations["baseline_source"] = source
+    rep.simulations["packing_cache"] = {
+        "directory": "off" if pcache is None else str(own),
+        "beds_deposited": sum(len(_cached_beds(d) - b) for d, b in beds_before.items()),
+        "directories": [str(d) for d in beds_before]}
     if decimated:  # done here, before the baseline's settings, so diagnose() saw none to do
         rep.fit["decimated"] = decimated
     rep.fit["recorded_channels"] = {rom: {"recorded": name, "converted": conversions.get(rom)}
@@ -505,8 +517,8 @@ def search_load(scen) -> float:
     return _bed_grains(spec) * ref_dt / dt
 
 
-def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
-                  ) -> tuple[dict[str, Any], Any, str]:
+def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path,
+                  packing_cache: Path | None = None) -> tuple[dict[str, Any], Any, str]:
     """The full-model search of ``crashdem diagnose`` (``--full-search``): the effects searched
     (the drop catalogue's ``full_search`` minus the physics the scenario already has switched
     on), the simulator it runs on (None: the full simulator) and a one-line description.
@@ -517,7 +529,8 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     are then confirmed at the scenario's own (``screen_then_confirm``'s ``search_simulator``;
     coarse runs instead of full ones: at the default resolution, 16,300 grains, one full run
     takes about two minutes); ``full`` always on the scenario; ``coarse`` always coarse;
-    ``off`` none."""
+    ``off`` none. The coarse runs deposit their beds in ``packing_cache`` when given
+    (``_packing_cache``), else in ``out/search_runs/packings``."""
     from crashdem.diagnosis.catalogue import DROP
 
     if mode not in ("auto", "full", "coarse", "off"):
@@ -550,6 +563,10 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     coarse = {k: v for k, v in SEARCH_COARSE.items()
               if not k.startswith("container.") or k in keep}
     search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs")
+    if packing_cache is not None:
+        from crashdem.run import share_packings
+
+        share_packings(out / "search_runs", packing_cache)
     return searched, search, (f"{len(searched)} effects at the coarse resolution "
                               f"({', '.join(f'{k}={v:g}' for k, v in coarse.items())}), the "
                               f"leading ones confirmed at the scenario's")
@@ -623,19 +640,44 @@ class _LocalFallback:
 DEFAULT_FULL_CONFIRM = 3
 
 
-def _share_packings(source: str, run_dirs: list[Path]) -> None:
-    """Let the confirmation runs reuse the baseline's deposited beds: link the packing cache of
-    each confirmation run directory (``OUT/confirmation.h5.members`` on Dask, ``OUT/full_runs``
-    in process) to the baseline run's (``<baseline dir>/packings``) when it does not exist yet."""
-    if not (source.startswith("full run ") or source.startswith("full result ")):
-        return
+def _packing_cache(text: str | None) -> Path | None:
+    """The packing cache of ``--packing-cache`` (``crashdem.run.packing_cache``): None (the
+    default) -> the user's shared cache, ``off`` -> None (each diagnosis deposits its beds in
+    its own output directory), a directory -> that directory (under the engine's fingerprint)."""
+    from crashdem.run import packing_cache
+
+    if text is None:
+        return packing_cache()
+    if text.strip().lower() in ("off", "none", ""):
+        return None
+    return packing_cache(text)
+
+
+def _cached_beds(cache: Path | None) -> set[Path]:
+    return set(cache.glob("packing-*.h5")) if cache is not None and cache.is_dir() else set()
+
+
+def _share_packings(source: str, run_dirs: list[Path], cache: Path | None = None
+                    ) -> Path | None:
+    """Let the confirmation runs reuse deposited beds: link the packing cache of each
+    confirmation run directory (``OUT/confirmation.h5.members`` on Dask, ``OUT/full_runs`` in
+    process), when it does not exist yet, to the baseline run's (``<baseline dir>/packings``:
+    the runs then take the baseline's own bed; for a baseline run by this diagnosis that is
+    ``cache`` when given), else to ``cache``. Returns the directory linked to (resolved), or
+    None."""
     from crashdem.run import share_packings
 
-    base = Path(source.split(" ", 2)[2]).parent / "packings"
-    if not base.is_dir():
-        return
-    for d in run_dirs:
-        share_packings(d, base)
+    target = None
+    if source.startswith("full run ") or source.startswith("full result "):
+        base = Path(source.split(" ", 2)[2]).parent / "packings"
+        if base.is_dir():
+            target = base.resolve()
+    if target is None and cache is not None:
+        target = cache
+    if target is not None:
+        for d in run_dirs:
+            share_packings(d, target)
+    return target
 
 
 #: simulation channels that stand for each model channel when the recording's names differ
@@ -659,8 +701,8 @@ def _simulate(params: RomParams | PlanarParams, settings: RomSettings) -> dict[s
 
 def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
               settings: RomSettings,
-              mode: str = "run", out_dir: Path | None = None
-              ) -> tuple[dict[str, Signal], str]:
+              mode: str = "run", out_dir: Path | None = None,
+              packing_cache: Path | None = None) -> tuple[dict[str, Signal], str]:
     """The baseline simulation the recording is compared with.
 
     ``mode``:
@@ -672,6 +714,9 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
       * ``"result"``: the existing full result only (error when missing);
       * ``"rom"``: the scenario's reduced-order model (fast; no anchor, so model-form
         differences of another code are not separated from missing physics).
+
+    A run made here deposits its bed in ``packing_cache`` when given, else in
+    ``out_dir/baseline/packings``.
     """
     if mode not in ("run", "result", "rom"):
         raise ValueError(f"--baseline={mode!r}: must be one of 'run', 'result', 'rom'")
@@ -692,6 +737,10 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
         raise ValueError(f"--baseline=result: no full result of the scenario with the diagnosed "
                          f"channels at {path}; run `crashdem run` first or use --baseline run")
     out = Path(out_dir if out_dir is not None else ".") / "baseline"
+    if packing_cache is not None:
+        from crashdem.run import share_packings
+
+        share_packings(out, packing_cache)
     path = run_scenario(scen.with_overrides({"output.snapshots": 0}), out_dir=out,
                         progress=False, plots=False)
     got = channels(path)

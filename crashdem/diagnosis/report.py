@@ -230,6 +230,12 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
               + (f"; search simulations: {sims['search_simulations']}"
                  if sims.get("search_simulations") else "")
               + f"; wall time {sims['wall_time_s']:.1f} s.", ""]
+    pc = sims.get("packing_cache")
+    if isinstance(pc, dict):
+        lines += [f"Deposited beds: {pc['beds_deposited']} new"
+                  + (f" in the packing cache {pc['directory']} (shared with later diagnoses of "
+                     f"this scenario)" if pc["directory"] != "off" else " (packing cache off)")
+                  + ".", ""]
     if plots:
         lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
     return "\n".join(lines)

@@ -241,6 +241,73 @@ def test_spec_hash_stable_and_sensitive():
         pk.PackingSpec(**dict(kw, layers=(pk.LayerSpec(3.0),)))
 
 
+def test_cached_deposits_a_bed_once_for_concurrent_callers(tmp_path, monkeypatch):
+    """Four threads asking a shared cache for the same bed at once (as diagnoses running side
+    by side do): ``build`` runs once, the others wait for its lock and load the saved file,
+    and all get the same bed. Oracle: the call count and bit-identical arrays. Without the
+    lock each caller found no file and built it (measured: 4 builds)."""
+    import threading
+    import time
+
+    spec = pk.PackingSpec(container=pk.BoxRegion((0, 0, 0), (1, 1, 2)),
+                          materials=(_soil(),), layers=(pk.LayerSpec(1.0),),
+                          radius=pk.RadiusDistribution(0.05, 0.2))
+    toy = _toy_packing()
+    calls = []
+
+    def slow_build(s, progress=None):
+        calls.append(s.hash())
+        time.sleep(0.3)  # long enough for every other thread to reach the cache
+        return dataclasses.replace(toy, spec={**toy.spec, "__hash__": s.hash()})
+
+    monkeypatch.setattr(pk, "build", slow_build)
+    got: list = [None] * 4
+
+    def ask(i):
+        got[i] = pk.cached(spec, tmp_path / "shared")
+
+    threads = [threading.Thread(target=ask, args=(i,)) for i in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert calls == [spec.hash()]
+    assert all(np.array_equal(g.x, toy.x) and g.content_hash == got[0].content_hash
+               for g in got)
+    assert [p.name for p in (tmp_path / "shared").glob("*.h5")] == [
+        f"packing-{spec.hash()[:20]}.h5"]
+    # a later caller loads it (no build), rebuild=True builds again
+    pk.cached(spec, tmp_path / "shared")
+    assert len(calls) == 1
+    pk.cached(spec, tmp_path / "shared", rebuild=True)
+    assert len(calls) == 2
+
+
+def test_code_fingerprint_follows_the_engine_and_its_compilers(tmp_path, monkeypatch):
+    """The name a shared cache keeps its beds under is stable for one install and changes
+    with any byte of the soil engine's modules and with the numba or numpy version (each can
+    change a deposited bed while the spec hash stays the same)."""
+    import shutil
+
+    fp = pk.code_fingerprint()
+    assert fp == pk.code_fingerprint() and len(fp) == 16 and int(fp, 16) >= 0
+    copy = tmp_path / "soil"
+    shutil.copytree(pathlib.Path(pk.__file__).parent, copy,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    monkeypatch.setattr(pk, "__file__", str(copy / "packing.py"))
+    assert pk.code_fingerprint() == fp  # the same bytes elsewhere
+    kern = copy / "_kernels.py"
+    kern.write_text(kern.read_text() + "\n# an edit\n")
+    assert pk.code_fingerprint() != fp
+    monkeypatch.undo()
+    assert pk.code_fingerprint() == fp
+    monkeypatch.setattr(pk.numba, "__version__", "0.0.0")
+    assert pk.code_fingerprint() != fp
+    monkeypatch.undo()
+    monkeypatch.setattr(pk.np, "__version__", "0.0.0")
+    assert pk.code_fingerprint() != fp
+
+
 # --------------------------------------------------------------------------------------------
 # deposition, layers, slope (use the DEM engine; kept small: a few hundred grains)
 # --------------------------------------------------------------------------------------------
