@@ -427,7 +427,8 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     (a batch of recordings): the first deposits the beds of its runs in the cache (under the
     engine's fingerprint), the second deposits none -- every run of it, the baseline
     included, loads them -- and writes the same answer, hypotheses and scores, so a bed loaded
-    from the cache gives the run a freshly deposited one gives. ``off`` keeps the beds in OUT;
+    from the cache gives the run a freshly deposited one gives; with ``off`` the beds are
+    deposited again in OUT and give the same again;
     the default is the user's cache (``$CRASHDEM_CACHE/packings``). Measured on a 13.7 m Yade
     recording on the small bed (docs/diagnosis.md): 62 beds and 305 s, then 0 and 99 s."""
     import json
@@ -453,10 +454,10 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     sets = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in {
         **gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS, "scenario.name": "cache_baseline"}.items()]
 
-    def run(out):
+    def run(out, where=str(cache)):
         argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
                 "--out", str(out), "--workers", "0", "--full-search", "off",
-                "--full-confirm", "2", "--packing-cache", str(cache)]
+                "--full-confirm", "2", "--packing-cache", where]
         for s in sets:
             argv += ["--set", s]
         assert cli.main(argv) == 0
@@ -478,6 +479,15 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     assert [r["score"] for r in second["fit"]["confirmation"]] == [
         r["score"] for r in first["fit"]["confirmation"]]
     assert second["fit"]["before"] == first["fit"]["before"]
+    # off: the beds are deposited afresh in OUT (a real directory), the same answer and scores
+    third = run(tmp_path / "c", "off")
+    own = tmp_path / "c" / "baseline" / "packings"
+    assert own.is_dir() and not own.is_symlink()
+    assert third["simulations"]["packing_cache"]["directory"] == "off"
+    assert third["simulations"]["packing_cache"]["beds_deposited"] == len(list(own.glob("*.h5")))
+    assert len(list(own.glob("*.h5"))) == len(beds)
+    assert _timeless(third["hypotheses"]) == _timeless(first["hypotheses"])
+    assert third["fit"]["before"] == first["fit"]["before"]
     assert not (tmp_path / "user").exists()  # the default cache was not used
 
 
