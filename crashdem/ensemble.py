@@ -375,8 +375,7 @@ class RunMember:
             raise ValueError(f"RunMember.threads={self.threads!r}: must be an int >= 0 or None")
 
     def __call__(self, member: Member, path: Path) -> None:
-        from crashdem.run import packing_spec, run_scenario
-        from soil import packing as pk
+        from crashdem.run import run_scenario
 
         if member.scenario is None:
             raise ValueError(f"member {member.index}: RunMember needs a scenario")
@@ -387,12 +386,9 @@ class RunMember:
             ov["output.snapshots"] = 0
         scen = member.scenario.with_overrides(ov)
         path = Path(path)
-        run_dir = path.parent
-        cache = run_dir / "packings"
-        cache.mkdir(parents=True, exist_ok=True)
-        # deposited once per bed when members share the cache (``soil.packing.cached`` locks it)
-        pk.cached(packing_spec(scen), cache)
-        out = run_scenario(scen, out_dir=run_dir, progress=False, plots=False)
+        # the run takes its bed from ``path.parent/packings``; members sharing it deposit each
+        # bed once (``soil.packing.cached`` holds a lock while it deposits)
+        out = run_scenario(scen, out_dir=path.parent, progress=False, plots=False)
         os.replace(out, path)
 
 

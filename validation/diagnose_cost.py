@@ -70,16 +70,6 @@ def truth_recording(effect: str, value: float, out: Path, threads: int) -> Path:
     return write_recording(out / "rec.csv", rec)
 
 
-def _timeless(x):
-    """``x`` (report JSON) without its wall times (keys ``wall_time_s``, ``*_wall_s``)."""
-    if isinstance(x, dict):
-        return {k: _timeless(v) for k, v in x.items()
-                if k != "wall_time_s" and not k.endswith("_wall_s")}
-    if isinstance(x, list):
-        return [_timeless(v) for v in x]
-    return x
-
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--effect", choices=sorted(EFFECT_KEYS), default="contact_damping")
@@ -108,9 +98,11 @@ def main(argv=None) -> int:
     wall, rep = diagnose(out / "diagnosis")
     warm = None
     if args.warm:
+        from crashdem.diagnosis.report import without_wall_times
+
         wall_w, rep_w = diagnose(out / "diagnosis_warm")
         same = (rep_w["missing_physics"] == rep["missing_physics"]
-                and _timeless(rep_w["hypotheses"]) == _timeless(rep["hypotheses"])
+                and without_wall_times(rep_w["hypotheses"]) == without_wall_times(rep["hypotheses"])
                 and rep_w["fit"]["before"] == rep["fit"]["before"])
         warm = {"diagnosis_wall_s": wall_w, "same_report": same,
                 "beds_deposited": rep_w["simulations"]["packing_cache"]["beds_deposited"]}

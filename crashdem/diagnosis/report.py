@@ -35,6 +35,17 @@ def _clean(x: Any) -> Any:
     return x
 
 
+def without_wall_times(x: Any) -> Any:
+    """Report JSON (or a part of it) without its wall times (keys ``wall_time_s`` and
+    ``*_wall_s``): what two diagnoses of the same inputs must agree on."""
+    if isinstance(x, dict):
+        return {k: without_wall_times(v) for k, v in x.items()
+                if k != "wall_time_s" and not k.endswith("_wall_s")}
+    if isinstance(x, list):
+        return [without_wall_times(v) for v in x]
+    return x
+
+
 def to_json(report) -> str:
     """The report as JSON text (what ``report.json`` holds)."""
     return json.dumps(_clean(report.to_dict()), indent=2, sort_keys=False)

@@ -412,16 +412,6 @@ def test_cli_reads_other_conventions_of_the_same_recording(tmp_path):
     assert abs(h["parameters"]["speed_offset"] / truth - 1.0) < 0.01, (h["parameters"], truth)
 
 
-def _timeless(x):
-    """Report JSON without its wall times (keys ``wall_time_s``, ``*_wall_s``)."""
-    if isinstance(x, dict):
-        return {k: _timeless(v) for k, v in x.items()
-                if k != "wall_time_s" and not k.endswith("_wall_s")}
-    if isinstance(x, list):
-        return [_timeless(v) for v in x]
-    return x
-
-
 def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     """Two diagnoses of one scenario into two output directories with one ``--packing-cache``
     (a batch of recordings): the first deposits the beds of its runs in the cache (under the
@@ -436,11 +426,13 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     from crashdem import cli
     from crashdem.diagnosis import generator_dem as gd
     from crashdem.diagnosis.cli import _packing_cache
+    from crashdem.diagnosis.report import without_wall_times
     from crashdem.recordings import write_recording
     from crashdem.run import packing_cache
     from soil.packing import code_fingerprint
 
-    assert _timeless({"a": [{"wall_time_s": 1, "b": 2}], "full_wall_s": 3}) == {"a": [{"b": 2}]}
+    assert without_wall_times({"a": [{"wall_time_s": 1, "b": 2}], "full_wall_s": 3}) == {
+        "a": [{"b": 2}]}
 
     case = dem_concealed_case(21, None)  # from the generator's cache, before the next line
     monkeypatch.setenv("CRASHDEM_CACHE", str(tmp_path / "user"))
@@ -470,12 +462,13 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
         "directory": here, "beds_deposited": len(beds), "directories": [here]}
     assert len(beds) >= 1
     assert second["simulations"]["packing_cache"]["beds_deposited"] == 0
-    assert "Deposited beds: 0 new in the packing cache" in (tmp_path / "b" / "report.md").read_text()
+    md = (tmp_path / "b" / "report.md").read_text()
+    assert "Deposited beds: 0 new in the packing cache" in md
     for out in ("a", "b"):
         link = tmp_path / out / "baseline" / "packings"
         assert link.is_symlink() and link.resolve() == (cache / code_fingerprint()).resolve()
     assert second["missing_physics"] == first["missing_physics"] is None
-    assert _timeless(second["hypotheses"]) == _timeless(first["hypotheses"])
+    assert without_wall_times(second["hypotheses"]) == without_wall_times(first["hypotheses"])
     assert [r["score"] for r in second["fit"]["confirmation"]] == [
         r["score"] for r in first["fit"]["confirmation"]]
     assert second["fit"]["before"] == first["fit"]["before"]
@@ -486,7 +479,7 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     assert third["simulations"]["packing_cache"]["directory"] == "off"
     assert third["simulations"]["packing_cache"]["beds_deposited"] == len(list(own.glob("*.h5")))
     assert len(list(own.glob("*.h5"))) == len(beds)
-    assert _timeless(third["hypotheses"]) == _timeless(first["hypotheses"])
+    assert without_wall_times(third["hypotheses"]) == without_wall_times(first["hypotheses"])
     assert third["fit"]["before"] == first["fit"]["before"]
     assert not (tmp_path / "user").exists()  # the default cache was not used
 
