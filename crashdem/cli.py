@@ -132,8 +132,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--full-search", choices=("auto", "full", "coarse", "off"), default="auto",
                    help="run each soil effect at levels of its main parameter in the full DEM "
                         "(its own terms, e.g. contact cohesion) before naming one: on the "
-                        "scenario itself (full), on the scenario at 0.10 m grains in a 2 m tank "
-                        "with the leading levels confirmed at the scenario's resolution "
+                        "scenario itself (full), on the scenario at 0.10 m grains (or its own, "
+                        "when coarser) in a 2 m tank (or its own, when smaller) with the leading levels confirmed at the scenario's resolution "
                         "(coarse), auto = coarse when the scenario is finer and one impact costs "
                         "more than in a bed of about 2,500 grains at 0.075 m, off = none")
     d.add_argument("--replicates", type=int, default=None, metavar="N",

@@ -517,6 +517,22 @@ def search_load(scen) -> float:
     return _bed_grains(spec) * ref_dt / dt
 
 
+def search_tier(scen) -> dict[str, Any]:
+    """The overrides of the coarse search tier for ``scen``: ``SEARCH_COARSE``, but never finer
+    or larger than the scenario itself -- the grain radius at least the scenario's, the radius
+    spread and the container (a cylinder's diameter; a box's length and width, each) at most
+    the scenario's. A tier wider than the scenario's container would move its walls away from
+    the impact, and one with finer grains would cost more than the scenario."""
+    box = scen.get("container.shape") == "box"
+    out: dict[str, Any] = {
+        "soil.radius": max(SEARCH_COARSE["soil.radius"], float(scen.get("soil.radius"))),
+        "soil.radius_spread": min(SEARCH_COARSE["soil.radius_spread"],
+                                  float(scen.get("soil.radius_spread")))}
+    for k in (("container.length", "container.width") if box else ("container.diameter",)):
+        out[k] = min(SEARCH_COARSE[k], float(scen.get(k)))
+    return out
+
+
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path,
                   packing_cache: Path | None = None) -> tuple[dict[str, Any], Any, str]:
     """The full-model search of ``crashdem diagnose`` (``--full-search``): the effects searched
@@ -547,11 +563,10 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         ok = tuple(x for x in fs.values if _runnable(scen, fs.overrides(x)))
         if len(ok) >= 2:
             searched[k] = replace(fs, values=ok) if ok != fs.values else fs
-    box = scen.get("container.shape") == "box"
-    size = max(scen.get("container.length"), scen.get("container.width")) if box \
-        else scen.get("container.diameter")
-    finer = (scen.get("soil.radius") < SEARCH_COARSE["soil.radius"] * 0.999
-             or size > SEARCH_COARSE["container.diameter"] * 1.001)
+    coarse = search_tier(scen)
+    # finer grains or a larger container than the tier (its radius spread alone does not count)
+    finer = any(not math.isclose(v, float(scen.get(k)), rel_tol=1e-3)
+                for k, v in coarse.items() if k != "soil.radius_spread")
     if mode == "full" or (mode == "auto" and not finer):
         return searched, None, f"{len(searched)} effects on the scenario itself"
     load = search_load(scen) if mode == "auto" else math.inf
@@ -559,9 +574,6 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         return searched, None, (f"{len(searched)} effects on the scenario itself (a small bed: "
                                 f"about {bed_grains(scen):,.0f} grains, load {load:,.0f} <= "
                                 f"{AUTO_FULL_LOAD:,})")
-    keep = ("container.length", "container.width") if box else ("container.diameter",)
-    coarse = {k: v for k, v in SEARCH_COARSE.items()
-              if not k.startswith("container.") or k in keep}
     search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs")
     if packing_cache is not None:
         from crashdem.run import share_packings

@@ -1260,3 +1260,53 @@ def test_auto_search_runs_on_a_small_bed_itself(tmp_path):
                                     "soil.radius": 0.05, "scenario.threads": 1})
     packed = pk.build(packing_spec(tiny))
     assert 0.6 * bed_grains(tiny) <= len(packed.radius) <= bed_grains(tiny)
+
+
+def test_search_tier_is_never_finer_or_larger_than_the_scenario(tmp_path):
+    """The coarse search tier (``cli.search_tier``) takes ``SEARCH_COARSE``'s 0.10 m grains,
+    0.10 spread and 2 m container only where they coarsen or shrink the scenario: a tank
+    smaller than 2 m keeps its own size (searched in a 2 m tank its walls would move away from
+    the impact), coarser grains keep theirs, a narrower spread keeps its own; a box is
+    clamped side by side. ``_search_setup`` runs the tier it describes, and a scenario the tier
+    would not change is searched on itself."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.cli import SEARCH_COARSE, _search_setup, search_tier
+    from crashdem.diagnosis.generator_dem import scenario_path
+
+    campaign = scenario.load(scenario_path()).with_overrides(
+        {"physics.soil_layering.enabled": False})
+    assert search_tier(campaign) == {"soil.radius": 0.10, "soil.radius_spread": 0.10,
+                                     "container.diameter": 2.0}
+    assert search_tier(campaign) == {k: v for k, v in SEARCH_COARSE.items()
+                                     if k not in ("container.length", "container.width")}
+    cases = [  # overrides, expected tier, what auto does
+        ({"container.diameter": 1.5, "soil.radius": 0.05},
+         {"soil.radius": 0.10, "soil.radius_spread": 0.10, "container.diameter": 1.5}, "coarse"),
+        ({"soil.radius": 0.15, "soil.radius_spread": 0.0},
+         {"soil.radius": 0.15, "soil.radius_spread": 0.0, "container.diameter": 2.0}, None),
+        ({"container.shape": "box", "container.length": 1.5, "container.width": 3.0,
+          "soil.radius": 0.05},
+         {"soil.radius": 0.10, "soil.radius_spread": 0.10, "container.length": 1.5,
+          "container.width": 2.0}, "coarse"),
+        ({"container.diameter": 2.0, "soil.radius": 0.10}, None, "itself"),
+    ]
+    for i, (ov, tier, auto) in enumerate(cases):
+        scen = campaign.with_overrides(ov)
+        got = search_tier(scen)
+        if tier is not None:
+            assert got == tier, ov
+        # the tier never refines or enlarges the scenario
+        assert got["soil.radius"] >= scen.get("soil.radius")
+        assert got["soil.radius_spread"] <= scen.get("soil.radius_spread")
+        for k in ("container.diameter", "container.length", "container.width"):
+            if k in got:
+                assert got[k] <= scen.get(k), (ov, k)
+        _, sim, how = _search_setup(scen, False, "coarse", {}, tmp_path / f"c{i}")
+        assert sim is not None
+        for k, v in got.items():
+            assert f"{k}={v:g}" in how, (ov, how)
+        _, sim, how = _search_setup(scen, False, "auto", {}, tmp_path / f"a{i}")
+        if auto == "coarse":
+            assert sim is not None and "coarse" in how, (ov, how)
+        elif auto == "itself":
+            assert sim is None and how.endswith("on the scenario itself"), (ov, how)
