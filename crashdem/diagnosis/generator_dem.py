@@ -125,7 +125,10 @@ class DemConcealedCase:
 
     effect : the concealed catalogue effect (None for a null case)
     values : the effect's true parameters that are comparable with the ROM's (ROM names)
-    recalibration : true recalibration scales (always empty here: the soil is the same)
+    recalibration : the truth's soil values that differ from the baseline's (scenario keys
+        under ``soil.material``; ``dem_concealed_case(..., recalibration=...)``, else empty):
+        a wrong value of a parameter the model has, which the issue reports as a
+        recalibration, not as missing physics
     recording : the acquired channels (``accel_z``, ``velocity_z``)
     truth : the truth's scenario overrides (effect + numerics)
     drawn : every drawn scenario value of the effect (``physics.<effect>.<key>``)
@@ -303,8 +306,38 @@ def truth_numerics(rng: np.random.Generator, seed: int) -> dict[str, Any]:
             "instrumentation.sample_rate": TRUTH_SAMPLE_RATE}
 
 
-def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path | None = None
-                       ) -> DemConcealedCase:
+#: soil values a recalibration truth may change (``dem_concealed_case(recalibration=...)``):
+#: the scenario's own material parameters, each by a factor in this range
+RECALIBRATION_KEYS = ("soil.material.young", "soil.material.friction_angle_deg",
+                      "soil.material.density", "soil.material.stiffness_ratio")
+RECALIBRATION_FACTOR = (0.25, 4.0)
+
+
+def check_recalibration(recalibration: dict[str, float] | None) -> dict[str, float]:
+    """``recalibration`` as floats; ValueError naming the key when it is not one of
+    ``RECALIBRATION_KEYS`` or its value is not within ``RECALIBRATION_FACTOR`` x the
+    scenario's."""
+    from crashdem import scenario as sc
+
+    out: dict[str, float] = {}
+    if not recalibration:
+        return out
+    base = sc.load(SCENARIO, dict(BASE_OVERRIDES))
+    lo, hi = RECALIBRATION_FACTOR
+    for k, v in recalibration.items():
+        if k not in RECALIBRATION_KEYS:
+            raise ValueError(f"recalibration[{k!r}]: not a soil value the truth may change; "
+                             f"allowed: {list(RECALIBRATION_KEYS)}")
+        ref = float(base.get(k))
+        if not (math.isfinite(float(v)) and lo * ref <= float(v) <= hi * ref):
+            raise ValueError(f"recalibration[{k!r}]={v!r}: must be in [{lo * ref:g}, "
+                             f"{hi * ref:g}] ({lo:g}-{hi:g} x the scenario's {ref:g})")
+        out[k] = float(v)
+    return out
+
+
+def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path | None = None,
+                       recalibration: dict[str, float] | None = None) -> DemConcealedCase:
     """Generate a DEM-truth recording with one concealed effect (or none: ``effect=None``).
 
     Parameters
@@ -313,14 +346,19 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
         the noise and the trigger offset
     effect : a name of ``DEM_EFFECT_DRAWS``, ``"random"`` or None (null case: only numerics differ)
     cache : cache root (default ``cache_dir()``)
+    recalibration : soil values of the truth other than the scenario's (``RECALIBRATION_KEYS``,
+        e.g. ``{"soil.material.friction_angle_deg": 35.0}``): a wrong value of a parameter
+        the model already has; with ``effect=None`` the right answer is no missing physics.
+        The seed's draws are those of the case without it.
     """
+    recal = check_recalibration(recalibration)
     rng = np.random.default_rng(seed)
     if effect == "random":
         names = sorted(DEM_EFFECT_DRAWS)
         effect = names[int(rng.integers(len(names)))]
     eff_ov = draw_dem_effect(effect, rng) if effect is not None else {}
     num = truth_numerics(rng, seed)
-    truth_ov = {**num, **eff_ov}
+    truth_ov = {**num, **eff_ov, **recal}
     rec, meta, offset = _acquired_truth(truth_ov, rng, cache)
     values: dict[str, float] = {}
     drawn: dict[str, float] = {}
@@ -329,7 +367,7 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
             values[rom_name] = float(eff_ov[f"physics.{effect}.{key}"])
         drawn = {k: (v if isinstance(v, str) else float(v)) for k, v in eff_ov.items()
                  if not k.endswith(".enabled")}
-    return DemConcealedCase(effect, values, {}, seed, rec, truth_ov, offset, meta, drawn,
+    return DemConcealedCase(effect, values, recal, seed, rec, truth_ov, offset, meta, drawn,
                             dem_baseline(cache))
 
 

@@ -3,6 +3,7 @@ stronger effect than the drawn span on an otherwise unchanged case. No Yade run 
 run is intercepted where the case hands its configuration to Yade."""
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -69,3 +70,116 @@ def test_the_script_refuses_a_malformed_pin(argv, capsys):
     with pytest.raises(SystemExit) as ex:
         main(argv)
     assert ex.value.code == 2 and "--fix" in capsys.readouterr().err
+
+
+def test_cli_mode_runs_the_command_a_user_types(monkeypatch, tmp_path):
+    """``diagnose_yade.py --cli``: each case's lab channels go to ``<case>/rec.csv`` and through
+    ``python -m crashdem diagnose`` with the Yade test's tank and bed (``TEST_SETUP``) and the
+    extra arguments; the row is read from the report (the named hypothesis's parameters and
+    their errors against the truth). No Yade and no diagnosis run: the case and the command
+    are intercepted, the command line is parsed by the real parser."""
+    import json
+    import subprocess
+
+    import numpy as np
+
+    import validation.diagnose_yade as dy
+    from crashdem import scenario as sc
+    from crashdem.cli import build_parser
+    from crashdem.diagnosis import generator_dem
+    from crashdem.signal import Signal
+
+    t = np.arange(0.0, 0.1, 1e-4)
+    case = cases.YadeCase("boundary_proximity", {"floor_depth": 0.8}, 11,
+                          {"accel_z": Signal("accel_z", t, np.sin(t), "m/s^2"),
+                           "velocity_z": Signal("velocity_z", t, np.cos(t), "m/s")},
+                          {"bed_depth": 0.8}, meta={"grains": 1600, "dt": 1e-5})
+    monkeypatch.setattr(dy, "make_case", lambda *a, **k: ("boundary_proximity", case,
+                                                          case.values))
+    seen = {}
+    real_run = subprocess.run
+
+    def fake_run(cmd, **kw):
+        if cmd[:2] != [sys.executable, "-m"]:  # e.g. platform.uname's
+            return real_run(cmd, **kw)
+        seen["cmd"] = cmd
+        args = build_parser().parse_args(cmd[3:])
+        seen["args"] = args
+        out = Path(args.out)
+        out.mkdir(parents=True)
+        (out / "report.json").write_text(json.dumps({
+            "missing_physics": "boundary_proximity",
+            "hypotheses": [{"name": "cohesion", "parameters": {"cohesion": 1e5},
+                            "delta_bic_vs_recalibration": 3.0},
+                           {"name": "boundary_proximity", "parameters": {"floor_depth": 0.7},
+                            "delta_bic_vs_recalibration": 2.0}],
+            "decision": "boundary_proximity confirmed",
+            "fit": {"before": {"overall": 0.6}, "after": {"overall": 0.7},
+                    "after_full": {"overall": 0.8}},
+            "simulations": {"full_simulations": 74, "full_search": "5 effects",
+                            "packing_cache": {"beds_deposited": 3}}}))
+        return subprocess.CompletedProcess(cmd, 0, "", "")
+
+    monkeypatch.setattr(subprocess, "run", fake_run)
+    row = dy.cli_case("boundary_proximity", 11, tmp_path, generator_dem.SCENARIO,
+                      extra=["--packing-cache", str(tmp_path / "beds")])
+    cmd, args = seen["cmd"], seen["args"]
+    assert cmd[:4] == [sys.executable, "-m", "crashdem", "diagnose"]
+    assert Path(args.recording) == tmp_path / "boundary_proximity_11" / "rec.csv"
+    assert Path(args.recording).is_file() and args.packing_cache == str(tmp_path / "beds")
+    assert Path(args.scenario) == generator_dem.SCENARIO
+    overrides = dict(sc.parse_override(s) for s in args.set)
+    assert overrides == dy.TEST_SETUP == {"container.diameter": 2.0,
+                                          "physics.soil_layering.enabled": False}
+    sc.load(args.scenario, overrides)  # the scenario takes them
+    assert row["claimed"] == "boundary_proximity" and row["top_ranked"] == "cohesion"
+    assert row["fitted"] == {"floor_depth": 0.7}
+    assert row["parameter_errors"] == {"floor_depth": pytest.approx(-0.125)}
+    assert (row["score_before"], row["score_after"]) == (0.6, 0.8)
+    assert (row["full_simulations"], row["beds_deposited"]) == (74, 3)
+    # a failed command is an error with its output, not a row
+    monkeypatch.setattr(subprocess, "run", lambda cmd, **kw: subprocess.CompletedProcess(
+        cmd, 2, "", "crashdem diagnose: error: --recording: no such file")
+        if cmd[:2] == [sys.executable, "-m"] else real_run(cmd, **kw))
+    with pytest.raises(RuntimeError, match="no such file"):
+        dy.cli_case(None, 21, tmp_path, generator_dem.SCENARIO)
+
+
+def test_cli_args_need_cli(capsys):
+    from validation.diagnose_yade import main
+
+    with pytest.raises(SystemExit) as ex:
+        main(["--cli-args", "--full-search coarse"])
+    assert ex.value.code == 2 and "--cli-args needs --cli" in capsys.readouterr().err
+
+
+def test_a_recalibrated_yade_bed_changes_only_its_soil_value(monkeypatch, tmp_path):
+    """``yade_case(recalibration=...)``: the Yade bed gets another soil value (a stiffer bed, a
+    higher friction angle); the seed's other draws stay; keys and ranges are
+    ``generator_dem.check_recalibration``'s."""
+    import math
+
+    null = _cfg(monkeypatch, tmp_path, 21, None)
+    stiff = _cfg(monkeypatch, tmp_path, 21, None, recalibration={"soil.material.young": 4.0e7})
+    assert null["young"] == 2.0e7 and stiff["young"] == 4.0e7
+    assert {k: v for k, v in stiff.items() if k != "young"} == \
+        {k: v for k, v in null.items() if k != "young"}
+    rough = _cfg(monkeypatch, tmp_path, 21, None,
+                 recalibration={"soil.material.friction_angle_deg": 35.0})
+    assert rough["friction_angle"] == pytest.approx(math.radians(35.0))
+    assert {k: v for k, v in rough.items() if k != "friction_angle"} == \
+        {k: v for k, v in null.items() if k != "friction_angle"}
+    monkeypatch.setattr(cases, "run_yade", lambda cfg, cache: pytest.fail("ran Yade"))
+    for bad, word in (({"soil.radius": 0.08}, "allowed"),
+                      ({"soil.material.young": 1.0e9}, "[5e+06, 8e+07]")):
+        with pytest.raises(ValueError, match=re.escape(word)):
+            cases.yade_case(21, None, cache=tmp_path, recalibration=bad)
+
+
+def test_the_script_refuses_a_malformed_recalibration(capsys):
+    from validation.diagnose_yade import main
+
+    for argv in (["--recalibrate", "young"], ["--recalibrate", "soil.material.young=1e12"]):
+        with pytest.raises(SystemExit) as ex:
+            main(argv)
+        assert ex.value.code == 2 and "--recalibrate" in capsys.readouterr().err

@@ -160,7 +160,8 @@ def check_fixed(effect: str | None, fixed: Mapping[str, float] | None) -> dict[s
 
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
               cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False,
-              fixed: Mapping[str, float] | None = None) -> YadeCase:
+              fixed: Mapping[str, float] | None = None,
+              recalibration: Mapping[str, float] | None = None) -> YadeCase:
     """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
     drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline.
 
@@ -174,11 +175,18 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
 
     ``fixed`` pins drawn parameters of ``effect`` (names of ``YADE_EFFECT_DRAWS[effect]``) to
     given values, e.g. a stronger effect than the drawn span (``{"cohesion": 1e6}``); the seed
-    still draws everything else as without it (the draws are made, then replaced)."""
+    still draws everything else as without it (the draws are made, then replaced).
+
+    ``recalibration`` gives the Yade bed soil values other than the scenario's (the keys and
+    limits of ``generator_dem.check_recalibration``: ``soil.material.young``,
+    ``friction_angle_deg``, ``density``, ``stiffness_ratio``), e.g. a stiffer bed: a wrong
+    value of a parameter the model has, which is a recalibration, not missing physics. The
+    seed's draws are unchanged; the deposition uses them too (another bed)."""
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
     fixed = check_fixed(effect, fixed)
+    recal = generator_dem.check_recalibration(dict(recalibration or {}))
     cache = Path(cache or cache_dir())
     rng = np.random.default_rng(10_000 + seed)
     drawn: dict[str, Any] = {}
@@ -197,7 +205,8 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     dt_factor = round(float(rng.uniform(*DT_FACTOR)), 4)
     offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
     scen = _scenario()
-    m = scen["soil.material"]
+    m = {**scen["soil.material"],
+         **{k.rsplit(".", 1)[1]: v for k, v in recal.items()}}
     v_imp = scen.impact_velocity + float(drawn.get("speed_offset", 0.0))
     cfg: dict[str, Any] = {
         "seed": 2000 + int(seed), "radius": radius, "radius_spread": scen["soil.radius_spread"],
@@ -245,4 +254,5 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
-                     "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw})
+                     "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw},
+                    recal)
