@@ -1,6 +1,8 @@
 """Pinned draws of the Yade truth (``yade_case(fixed=...)``, ``diagnose_yade.py --fix``): a
-stronger effect than the drawn span on an otherwise unchanged case. No Yade run is needed: the
-run is intercepted where the case hands its configuration to Yade."""
+stronger effect than the drawn span on an otherwise unchanged case; recalibrated beds
+(``yade_case(recalibration=...)``, ``--recalibrate``); the script's ``--cli`` mode. No Yade run
+is needed: the run is intercepted where the case hands its configuration to Yade (and the
+command where the script hands it to ``crashdem diagnose``)."""
 from __future__ import annotations
 
 import re
