@@ -133,9 +133,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run each soil effect at levels of its main parameter in the full DEM "
                         "(its own terms, e.g. contact cohesion) before naming one: on the "
                         "scenario itself (full), on the scenario at 0.10 m grains (or its own, "
-                        "when coarser) in a 2 m tank (or its own, when smaller) with the leading levels confirmed at the scenario's resolution "
-                        "(coarse), auto = coarse when the scenario is finer and one impact costs "
-                        "more than in a bed of about 2,500 grains at 0.075 m, off = none")
+                        "when coarser) in a 2 m tank (or its own, when smaller) with the "
+                        "leading levels confirmed at the scenario's resolution (coarse), "
+                        "auto = coarse when the scenario is finer and one impact costs more "
+                        "than in a bed of about 2,500 grains at 0.075 m, off = none")
     d.add_argument("--replicates", type=int, default=None, metavar="N",
                    help="run the baseline with N other packing seeds (scenario.seed + 1 ... + N) "
                         "on the simulator the search runs on; an effect must fit the recording "

@@ -316,7 +316,8 @@ RECALIBRATION_FACTOR = (0.25, 4.0)
 def check_recalibration(recalibration: dict[str, float] | None) -> dict[str, float]:
     """``recalibration`` as floats; ValueError naming the key when it is not one of
     ``RECALIBRATION_KEYS`` or its value is not within ``RECALIBRATION_FACTOR`` x the
-    scenario's."""
+    scenario's, and the scenario's own error when the value is outside the field's range
+    (e.g. a friction angle of 90 deg or more)."""
     from crashdem import scenario as sc
 
     out: dict[str, float] = {}
@@ -333,6 +334,7 @@ def check_recalibration(recalibration: dict[str, float] | None) -> dict[str, flo
             raise ValueError(f"recalibration[{k!r}]={v!r}: must be in [{lo * ref:g}, "
                              f"{hi * ref:g}] ({lo:g}-{hi:g} x the scenario's {ref:g})")
         out[k] = float(v)
+    base.with_overrides(out)  # the scenario's own ranges
     return out
 
 

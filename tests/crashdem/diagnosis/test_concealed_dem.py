@@ -167,6 +167,9 @@ def test_dem_recalibration_is_not_missing_physics():
     ({"soil.material.young": 1.0e9}, ["recalibration['soil.material.young']=1000000000.0",
                                       "[5e+06, 8e+07]"]),
     ({"soil.material.friction_angle_deg": float("nan")}, ["friction_angle_deg"]),
+    # within 4 x the scenario's 30 deg but not a friction angle: the scenario's own range
+    ({"soil.material.friction_angle_deg": 100.0}, ["soil.material.friction_angle_deg=100.0",
+                                                   "[0, 90)"]),
 ])
 def test_dem_recalibration_refuses_other_keys_and_far_values(recal, words):
     with pytest.raises(ValueError) as err:
