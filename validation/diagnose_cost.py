@@ -4,10 +4,13 @@
     python validation/diagnose_cost.py                        # contact damping, e = 0.15
     python validation/diagnose_cost.py --effect initial_conditions --value -3.0
     python validation/diagnose_cost.py --warm    # and again, with the beds of the first run
+    python validation/diagnose_cost.py --effect none --recalibrate soil.material.young=4e7
 
 Truth: ``validation/scenarios/drop_s2_h13p70.toml`` at its resolution (0.075 m grains, 6 m
 tank, the compacted layer below 1 m) with another packing seed (7), ``solver.safety`` 0.2
-(baseline 0.3), the concealed effect switched on, sampled at 50 kHz and acquired like a lab
+(baseline 0.3), the concealed effect switched on (``--effect none``: no effect; ``--recalibrate KEY=VALUE``:
+a soil value other than the scenario's, ``generator_dem.check_recalibration``, a
+recalibration that must not be named missing physics), sampled at 50 kHz and acquired like a lab
 channel (``generator.acquire_samples``: 12.5 kHz, noise, +-2 ms trigger, CFC 60), written as
 CSV. Then the command a user runs, ``crashdem diagnose --scenario drop_s2_h13p70.toml
 --recording rec.csv --out DIR``, is run as a subprocess and timed: the baseline run (its
@@ -44,17 +47,21 @@ EFFECT_KEYS = {"contact_damping": "physics.contact_damping.restitution",
                "boundary_proximity": "physics.boundary_proximity.floor_depth"}
 
 
-def truth_recording(effect: str, value: float, out: Path, threads: int) -> Path:
-    """Run (or load) the default-resolution truth and write the lab recording as CSV."""
+def truth_recording(effect: str | None, value: float, out: Path, threads: int,
+                    recalibration: dict[str, float] | None = None) -> Path:
+    """Run (or load) the default-resolution truth and write the lab recording as CSV
+    (``effect`` None: no effect; ``recalibration``: the truth's other soil values)."""
     import numpy as np
 
     from crashdem.diagnosis.generator import acquire_samples
-    from crashdem.diagnosis.generator_dem import run_dem
+    from crashdem.diagnosis.generator_dem import check_recalibration, run_dem
     from crashdem.recordings import write_recording
 
     ov = {**DEFAULT_RESOLUTION, "scenario.seed": 7, "solver.safety": 0.2,
           "instrumentation.sample_rate": 50000.0, "scenario.threads": threads,
-          f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value}
+          **check_recalibration(recalibration)}
+    if effect is not None:
+        ov.update({f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value})
     if effect == "cohesion":
         ov["physics.cohesion.shear_strength"] = value
     if effect == "boundary_proximity" and value <= 1.0:
@@ -65,23 +72,47 @@ def truth_recording(effect: str, value: float, out: Path, threads: int) -> Path:
     acc, vel = raw["accel_z"], raw["velocity_z"]
     rec = acquire_samples(acc.t, {"accel_z": (acc.data, "m/s^2"), "velocity_z": (vel.data, "m/s")},
                           float(-vel.data[0]), rng, trigger_offset=float(rng.uniform(-0.002, 0.002)),
-                          source=f"crashdem DEM truth at the default resolution ({effect} = {value:g})")
+                          source="crashdem DEM truth at the default resolution ("
+                                 + (f"{effect} = {value:g}" if effect else "no effect")
+                                 + "".join(f", {k} = {v:g}" for k, v in
+                                           (recalibration or {}).items()) + ")")
     out.mkdir(parents=True, exist_ok=True)
     return write_recording(out / "rec.csv", rec)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--effect", choices=sorted(EFFECT_KEYS), default="contact_damping")
+    ap.add_argument("--effect", choices=[*sorted(EFFECT_KEYS), "none"],
+                    default="contact_damping")
     ap.add_argument("--value", type=float, default=0.15)
     ap.add_argument("--out", default="runs/diagnose_cost")
     ap.add_argument("--threads", type=int, default=2, help="threads of the truth run")
     ap.add_argument("--warm", action="store_true",
                     help="diagnose again with the packing cache the first diagnosis filled")
+    ap.add_argument("--recalibrate", nargs="+", action="extend", default=[],
+                    metavar="KEY=VALUE",
+                    help="a soil value of the truth other than the scenario's, e.g. "
+                         "soil.material.young=4e7 (keys: generator_dem.RECALIBRATION_KEYS)")
     args = ap.parse_args(argv)
+    from crashdem.diagnosis.generator_dem import check_recalibration
+
+    recal: dict[str, float] = {}
+    for item in args.recalibrate:
+        key, sep, value = item.partition("=")
+        try:
+            recal[key] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            ap.error(f"--recalibrate {item!r}: must be KEY=VALUE with a number")
+    try:
+        check_recalibration(recal)
+    except ValueError as err:
+        ap.error(f"--recalibrate: {err}")
+    effect = None if args.effect == "none" else args.effect
     out = Path(args.out)
     t0 = time.perf_counter()
-    rec = truth_recording(args.effect, args.value, out, args.threads)
+    rec = truth_recording(effect, args.value, out, args.threads, recal)
     t_truth = time.perf_counter() - t0
     cache = out / "packing_cache"
     shutil.rmtree(cache, ignore_errors=True)
@@ -109,7 +140,8 @@ def main(argv=None) -> int:
         print(f"again with the cached beds: {wall_w:.0f} s ({warm['beds_deposited']} beds "
               f"deposited), {'the same' if same else 'ANOTHER'} answer and hypotheses")
     named = next((h for h in rep["hypotheses"] if h["name"] == rep["missing_physics"]), None)
-    row = {"truth": args.effect, "value": args.value, "claimed": rep["missing_physics"],
+    row = {"truth": effect, "value": args.value if effect else None,
+           "recalibration": recal, "claimed": rep["missing_physics"],
            "parameters": named["parameters"] if named else None,
            "score_before": rep["fit"]["before"]["overall"],
            "score_after": (rep["fit"].get("after_full") or rep["fit"]["after"])["overall"],
