@@ -1,0 +1,57 @@
+"""``validation/diagnose_cost.py``'s truth: the effect's switch and value, or none
+(``--effect none``) with a recalibrated soil (``--recalibrate``). No run: the truth's
+configuration is intercepted where it is handed to the DEM."""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+if str(ROOT) not in sys.path:
+    sys.path.insert(0, str(ROOT))
+
+
+class _Handed(Exception):
+    pass
+
+
+def _truth(monkeypatch, tmp_path, *args) -> dict:
+    from crashdem.diagnosis import generator_dem
+    from validation import diagnose_cost
+
+    def intercept(ov, filtered):
+        raise _Handed(ov)
+
+    monkeypatch.setattr(generator_dem, "run_dem", intercept)
+    with pytest.raises(_Handed) as got:
+        diagnose_cost.truth_recording(*args[:2], tmp_path, 1, *args[2:])
+    return got.value.args[0]
+
+
+def test_truth_with_an_effect_without_one_and_recalibrated(monkeypatch, tmp_path):
+    from validation.diagnose_cost import DEFAULT_RESOLUTION
+
+    damped = _truth(monkeypatch, tmp_path, "contact_damping", 0.15)
+    assert damped["physics.contact_damping.enabled"] is True
+    assert damped["physics.contact_damping.restitution"] == 0.15
+    null = _truth(monkeypatch, tmp_path, None, 0.15)
+    assert not any(k.startswith("physics.contact_damping") for k in null)
+    assert {k: v for k, v in damped.items() if not k.startswith("physics.contact_damping")} \
+        == null
+    for k, v in DEFAULT_RESOLUTION.items():
+        assert null[k] == v
+    stiff = _truth(monkeypatch, tmp_path, None, 0.15, {"soil.material.young": 4.0e7})
+    assert stiff == {**null, "soil.material.young": 4.0e7}
+
+
+@pytest.mark.parametrize("argv", [["--effect", "none", "--recalibrate", "young"],
+                                  ["--effect", "none", "--recalibrate", "soil.radius=0.1"],
+                                  ["--recalibrate", "soil.material.young=1e12"]])
+def test_the_script_refuses_a_malformed_recalibration(argv, capsys):
+    from validation.diagnose_cost import main
+
+    with pytest.raises(SystemExit) as ex:
+        main(argv)
+    assert ex.value.code == 2 and "--recalibrate" in capsys.readouterr().err
