@@ -133,7 +133,7 @@ def test_dem_null_cases_claim_no_missing_physics(dem_runs):
         assert r.missing_physics is None, (c.seed, r.decision)
 
 
-#: recalibration truths (no effect, one soil value other than the scenario's): of 32 measured
+#: recalibration truths (no effect, one soil value other than the scenario's): of 38 measured
 #: (session 19: E x0.5-2, friction 25-38 deg, density x0.85-1.15, k_t/k_n 0.4, friction 35 deg
 #: with E x1.5; seeds 21-24), none claimed missing physics; these two came nearest -- a floor
 #: level at Delta BIC 45.3 under the replicates' 58.7 (E x2), contact damping 41.4 against
