@@ -94,19 +94,10 @@ def main(argv=None) -> int:
                     help="a soil value of the truth other than the scenario's, e.g. "
                          "soil.material.young=4e7 (keys: generator_dem.RECALIBRATION_KEYS)")
     args = ap.parse_args(argv)
-    from crashdem.diagnosis.generator_dem import check_recalibration
+    from crashdem.diagnosis.generator_dem import parse_recalibration
 
-    recal: dict[str, float] = {}
-    for item in args.recalibrate:
-        key, sep, value = item.partition("=")
-        try:
-            recal[key] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep:
-            ap.error(f"--recalibrate {item!r}: must be KEY=VALUE with a number")
     try:
-        check_recalibration(recal)
+        recal = parse_recalibration(args.recalibrate)
     except ValueError as err:
         ap.error(f"--recalibrate: {err}")
     effect = None if args.effect == "none" else args.effect

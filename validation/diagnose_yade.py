@@ -224,29 +224,14 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     if args.cli_args and args.cli is None:
         ap.error("--cli-args needs --cli DIR")
-    fixed: dict[str, float] = {}
-    for item in args.fix:
-        name, sep, value = item.partition("=")
-        try:
-            fixed[name] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep:
-            ap.error(f"--fix {item!r}: must be NAME=VALUE with a number, e.g. cohesion=1e6")
-    recal: dict[str, float] = {}
-    for item in args.recalibrate:
-        name, sep, value = item.partition("=")
-        try:
-            recal[name] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep:
-            ap.error(f"--recalibrate {item!r}: must be KEY=VALUE with a number, e.g. "
-                     f"soil.material.young=4e7")
-    try:
-        from crashdem.diagnosis.generator_dem import check_recalibration
+    from crashdem.diagnosis.generator_dem import number_assignments, parse_recalibration
 
-        check_recalibration(recal)
+    try:
+        fixed = number_assignments(args.fix, "cohesion=1e6")
+    except ValueError as err:
+        ap.error(f"--fix {err}")
+    try:
+        recal = parse_recalibration(args.recalibrate)
     except ValueError as err:
         ap.error(f"--recalibrate: {err}")
     for eff in args.effects if fixed else ():

@@ -338,6 +338,28 @@ def check_recalibration(recalibration: dict[str, float] | None) -> dict[str, flo
     return out
 
 
+def number_assignments(items, example: str) -> dict[str, float]:
+    """Command-line ``KEY=VALUE`` strings with a number as ``{key: float}`` (a later key
+    replaces an earlier one); ValueError naming the item and ``example`` otherwise. Used by the
+    validation scripts' ``--fix`` and ``--recalibrate``."""
+    out: dict[str, float] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        try:
+            out[key] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise ValueError(f"{item!r}: must be KEY=VALUE with a number, e.g. {example}")
+    return out
+
+
+def parse_recalibration(items) -> dict[str, float]:
+    """``--recalibrate KEY=VALUE ...`` of the validation scripts: ``number_assignments``, then
+    ``check_recalibration``."""
+    return check_recalibration(number_assignments(items, "soil.material.young=4e7"))
+
+
 def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path | None = None,
                        recalibration: dict[str, float] | None = None) -> DemConcealedCase:
     """Generate a DEM-truth recording with one concealed effect (or none: ``effect=None``).
