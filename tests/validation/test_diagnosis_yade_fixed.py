@@ -9,6 +9,7 @@ import re
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -185,3 +186,52 @@ def test_the_script_refuses_a_malformed_recalibration(capsys):
         with pytest.raises(SystemExit) as ex:
             main(argv)
         assert ex.value.code == 2 and "--recalibrate" in capsys.readouterr().err
+
+
+def _cubic_bed(r: float, layers: int, half_width: float = 1.0):
+    """Simple cubic lattice of spheres of radius ``r`` (spacing 2r) on the floor z = 0."""
+    g = np.arange(-half_width + r, half_width, 2.0 * r)
+    gx, gy, gz = np.meshgrid(g, g, r + 2.0 * r * np.arange(layers), indexing="ij")
+    x = np.column_stack([gx.ravel(), gy.ravel(), gz.ravel()])
+    return x, np.full(len(x), r)
+
+
+@pytest.mark.parametrize("r, layers", [(0.05, 12), (0.08, 7)])
+def test_bed_surface_of_a_cubic_lattice(r, layers):
+    """Oracle: in a simple cubic lattice the solid fraction of a section at distance d from a
+    layer's centre plane is pi (r^2 - d^2) / (4 r^2), its mean over the height 2 r^2 pi / (12
+    r^2) = pi / 6; half of that is reached d = r sqrt(2/3) above the top layer's centres."""
+    x, rad = _cubic_bed(r, layers)
+    top = r + 2.0 * r * (layers - 1)
+    assert cases.bed_surface(x, rad) == pytest.approx(top + r * np.sqrt(2.0 / 3.0), abs=0.02 * r)
+    # a grain layer more raises the surface by the spacing; the grains outside the central
+    # cylinder (a wall ring) do not count
+    x2, rad2 = _cubic_bed(r, layers + 1)
+    assert cases.bed_surface(x2, rad2) - cases.bed_surface(x, rad) == pytest.approx(2 * r, abs=1e-9)
+    ring = np.hypot(x2[:, 0], x2[:, 1]) > cases.SURFACE_REGION_RADIUS
+    keep = ~ring | (x2[:, 2] < top + r)
+    assert cases.bed_surface(x2[keep], rad2[keep]) == pytest.approx(cases.bed_surface(x2, rad2))
+
+
+def test_bed_surface_needs_grains_under_the_footprint():
+    x, rad = _cubic_bed(0.05, 3)
+    far = x + np.array([5.0, 0.0, 0.0])
+    with pytest.raises(ValueError, match="within 0.7 m of the axis"):
+        cases.bed_surface(far, rad)
+
+
+def test_realised_depths_are_measured_on_the_yade_bed(tmp_path):
+    """The compared floor depth of a Yade case is its bed's surface height (``bed_surface``:
+    the floor wall at z = 0), not the drawn trim height; the interface depth is that surface's
+    height above the level the Yade script makes stiffer (``surface_top - layer_depth``)."""
+    r, layers = 0.05, 8
+    x, rad = _cubic_bed(r, layers)
+    f = tmp_path / "packing.npz"
+    np.savez(f, x=x, radius=rad)
+    surface = cases.bed_surface(x, rad)
+    top = float(np.max(x[:, 2] + rad))
+    assert cases.realised_depths({"bed_depth": top + 0.02}, f, top) == {"floor_depth": surface}
+    got = cases.realised_depths({"layer_depth": 0.3, "layer_young_factor": 5.0}, f, top)
+    assert got == {"interface_depth": pytest.approx(surface - (top - 0.3))}
+    assert got["interface_depth"] < 0.3  # the highest grain top lies above the surface
+    assert cases.realised_depths({"cohesion": 2e5}, f, top) == {}

@@ -69,11 +69,75 @@ FIXED_LIMITS: dict[str, tuple[float, float, str]] = {
     "speed_offset": (-10.0, 10.0, "m/s"), "natural_frequency": (1.0, 2000.0, "Hz"),
     "damping_ratio": (0.0, 2.0, "1"),
 }
-#: drawn parameter -> ROM parameter with the same meaning (compared by the validation)
+#: drawn parameter -> ROM parameter with the same meaning (compared by the validation); the
+#: two depths are compared as the Yade bed realises them (``realised_depths``), not as drawn
 COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
             "speed_offset": "speed_offset", "natural_frequency": "mount_frequency"}
+#: radius [m] of the central cylinder of the 1 m tank whose sections locate a bed's free
+#: surface (``bed_surface``): the 0.45 m sphere's footprint and a grain ring, clear of the wall
+SURFACE_REGION_RADIUS = 0.7
 RADIUS_CHANGE = (0.10, 0.15)
 DT_FACTOR = (0.2, 0.4)
+
+
+def bed_surface(x: np.ndarray, radius: np.ndarray,
+                within: float = SURFACE_REGION_RADIUS) -> float:
+    """Height [m] of a deposited bed's free surface above its floor (z = 0): the level at which
+    the solid fraction of horizontal sections through the central cylinder (radius ``within``;
+    grains whose centre lies in it) falls for the last time to half of the bed's own, the
+    bed's being its mean from 5 to 2 mean radii below the highest centre.
+
+    This is the soil thickness a floor depth means whatever code made the bed. crashdem cuts a
+    deposited layer where the grain *centres* pass its top, and this level then lies within
+    0.035 m of the nominal top (measured on 105 of crashdem's 0.6-1.25 m beds of 0.07-0.11 m
+    grains: -0.034 to +0.024 m, mean -0.005 m), so crashdem's ``floor_depth`` is a thickness of
+    this kind. The Yade truth removes the grains whose *top* passes the drawn bed depth, so its
+    surface lies about a grain radius lower than drawn (measured: beds drawn at 0.764 / 0.825 /
+    2.0 m with 0.114 / 0.088 m grains have their surface at 0.637 / 0.732 / 1.909-1.912 m)."""
+    x = np.asarray(x, float)
+    r = np.asarray(radius, float)
+    inside = np.hypot(x[:, 0], x[:, 1]) < within
+    if inside.sum() < 10:
+        raise ValueError(f"bed_surface: {int(inside.sum())} grains within {within:g} m of the "
+                         f"axis; need at least 10")
+    xc, rc = x[inside, 2], r[inside]
+    r_mean = float(np.mean(rc))
+    area = math.pi * within ** 2
+
+    def solid(z: float) -> float:
+        d = np.abs(xc - z)
+        m = d < rc
+        return float(np.sum(math.pi * (rc[m] ** 2 - d[m] ** 2))) / area
+
+    z_top = float(np.max(xc))
+    lo = max(z_top - 5.0 * r_mean, float(np.min(xc)))
+    bulk = float(np.mean([solid(z) for z in np.linspace(lo, z_top - 2.0 * r_mean, 31)]))
+    zs = np.linspace(z_top - 2.0 * r_mean, float(np.max(xc + rc)), 241)
+    f = np.array([solid(z) for z in zs]) - 0.5 * bulk
+    # the highest section at or above half (a layered bed's fraction also dips between layers)
+    k = int(np.nonzero(f >= 0.0)[0][-1]) if np.any(f >= 0.0) else 0
+    if k == len(zs) - 1:
+        return float(zs[k])
+    return float(zs[k] + (zs[k + 1] - zs[k]) * f[k] / (f[k] - f[k + 1]))
+
+
+def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,
+                    surface_top: float) -> dict[str, float]:
+    """The drawn floor and interface depths of a Yade case as its bed realises them, in the
+    ROM's names: ``floor_depth`` the bed's surface height (``bed_surface``; the floor wall is at
+    z = 0), ``interface_depth`` that surface's height above the level below which the grains
+    are stiffer (the Yade script's ``surface - layer_depth``, ``surface`` = ``surface_top``, the
+    highest grain top)."""
+    if "bed_depth" not in drawn and "layer_depth" not in drawn:
+        return {}
+    z = np.load(packing_npz)
+    surface = bed_surface(z["x"], z["radius"])
+    out: dict[str, float] = {}
+    if "bed_depth" in drawn:
+        out["floor_depth"] = surface
+    if "layer_depth" in drawn:
+        out["interface_depth"] = surface - (float(surface_top) - float(drawn["layer_depth"]))
+    return out
 
 
 def yade_available() -> bool:
@@ -83,7 +147,10 @@ def yade_available() -> bool:
 
 @dataclass(frozen=True)
 class YadeCase:
-    """A Yade-made recording and its hidden truth (``generator.ConcealedCase`` interface)."""
+    """A Yade-made recording and its hidden truth (``generator.ConcealedCase`` interface).
+
+    ``values``: the comparable truth in the ROM's names, the floor and interface depths as the
+    bed realises them (``realised_depths``; ``drawn`` keeps the drawn ones)."""
 
     effect: str | None
     values: dict[str, float]
@@ -134,7 +201,9 @@ def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, An
                               capture_output=True, text=True, cwd=str(store), timeout=3600)
         if not Path(str(out) + ".npy").exists():
             raise RuntimeError(f"yade failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
-    return np.load(str(out) + ".npy"), json.loads(Path(str(out) + ".json").read_text())
+    info = json.loads(Path(str(out) + ".json").read_text())
+    info["packing_npz"] = cfg["packing_npz"]
+    return np.load(str(out) + ".npy"), info
 
 
 #: sample rate of the raw Yade output of ``yade_case(..., raw=True)`` [Hz]
@@ -252,7 +321,10 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         if not declare_cfc:
             rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
     values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
+    realised = realised_depths(drawn, info["packing_npz"], info["surface_z"])
+    values.update(realised)
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
-                     "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw},
+                     "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw,
+                     "realised": realised},
                     recal)
