@@ -57,6 +57,27 @@ def _fmt(v: float | None, nd: int = 3) -> str:
     return f"{v:.{nd}g}"
 
 
+def _not_told_apart(report, d: dict[str, Any]) -> str:
+    """The headline of a report whose confirmation found two effects it could not tell apart
+    (``fit["confirmation_ambiguous"]``): each with its located value (the full model's search
+    level, when it has one), Delta BIC over the reference and score."""
+    ev = {h["name"]: h.get("full_model_evidence") or {} for h in d["hypotheses"]}
+    cat = getattr(report, "catalogue", None)
+    searched = getattr(cat, "full_search", None) or {}
+    parts = []
+    for name, c in d["fit"]["confirmation_ambiguous"].items():
+        value = c.get("value", ev.get(name, {}).get("value"))
+        fs = searched.get(name)
+        where = ("" if value is None else
+                 f"{fs.parameter} = {_fmt(value)} {fs.unit}; " if fs is not None else
+                 f"level {_fmt(value)}; ")
+        parts.append(f"{name} ({where}Delta BIC {c['delta_bic_vs_reference']:.1f} over the "
+                     f"reference, score {_fmt(c['score'])})")
+    return (" and ".join(parts) + ": each fits the recording decisively better than the "
+            "reference, neither decisively better than the other, so neither is named -- the "
+            "recording alone cannot choose between them at this resolution")
+
+
 def to_markdown(report, plots: list[str] | None = None) -> str:
     """A readable summary of the report."""
     from crashdem.diagnosis import CONFIRM_MIN_GAIN, REPLICATE
@@ -66,8 +87,10 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
     lines = ["# crashdem diagnosis report", ""]
     mp = d["missing_physics"]
     lines += [f"**Missing physics:** {mp if mp else 'none claimed'}  ",
-              f"**Best explanation:** {d['best'] or 'baseline (within noise)'}  ",
-              f"**Decision:** {d['decision']}", ""]
+              f"**Best explanation:** {d['best'] or 'baseline (within noise)'}  "]
+    if not mp and fit.get("confirmation_ambiguous"):
+        lines.append(f"**Not told apart:** {_not_told_apart(report, d)}  ")
+    lines += [f"**Decision:** {d['decision']}", ""]
     conv = fit.get("recorded_channels")
     if conv:
         lines += ["## Recorded channels", "", "| model channel | recorded as | conversion |",

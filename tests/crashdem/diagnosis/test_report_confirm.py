@@ -238,6 +238,18 @@ def test_two_effects_that_fit_equally_are_not_told_apart(layering_case):
     assert "neither named" in rep.decision
     for name in amb:
         assert "not told apart" in rep.fit["confirmation_verdicts"][name]
+    # report.md heads with the pair, each with its located level and evidence
+    from crashdem.diagnosis.report import to_markdown
+
+    head = next(ln for ln in to_markdown(rep).splitlines() if ln.startswith("**Not told apart:**"))
+    ev = {h["name"]: h["full_model_evidence"] for h in rep.hypotheses if h["name"] in amb}
+    for name, c in amb.items():
+        fs = rep.catalogue.full_search[name]
+        # a search level stands for the effect: its value; a screened candidate's run: none
+        where = f"{fs.parameter} = {ev[name]['value']:.3g} {fs.unit}; " if "value" in ev[name] else ""
+        assert f"{name} ({where}Delta BIC {c['delta_bic_vs_reference']:.1f} over the reference" \
+            in head, head
+    assert any("value" in e for e in ev.values())
 
 
 def test_a_replicate_that_fits_as_well_names_nothing(layering_case, tmp_path):
