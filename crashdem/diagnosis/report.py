@@ -62,15 +62,12 @@ def _not_told_apart(report, d: dict[str, Any]) -> str:
     (``fit["confirmation_ambiguous"]``): each with its located value (the full model's search
     level, when it has one), Delta BIC over the reference and score."""
     ev = {h["name"]: h.get("full_model_evidence") or {} for h in d["hypotheses"]}
-    cat = getattr(report, "catalogue", None)
-    searched = getattr(cat, "full_search", None) or {}
     parts = []
     for name, c in d["fit"]["confirmation_ambiguous"].items():
+        # a value comes only from a search level, so the effect is a searched one
         value = c.get("value", ev.get(name, {}).get("value"))
-        fs = searched.get(name)
-        where = ("" if value is None else
-                 f"{fs.parameter} = {_fmt(value)} {fs.unit}; " if fs is not None else
-                 f"level {_fmt(value)}; ")
+        fs = report.catalogue.full_search.get(name)
+        where = f"{fs.parameter} = {_fmt(value)} {fs.unit}; " if value is not None else ""
         parts.append(f"{name} ({where}Delta BIC {c['delta_bic_vs_reference']:.1f} over the "
                      f"reference, score {_fmt(c['score'])})")
     return (" and ".join(parts) + ": each fits the recording decisively better than the "
