@@ -738,6 +738,46 @@ def porosity_profile(x, radius, region: Region, edges) -> np.ndarray:
     return np.array([porosity(x, radius, region.with_z(e[k], e[k + 1])) for k in range(len(e) - 1)])
 
 
+def free_surface_height(z, radius, area: float) -> float:
+    """Height [m] of a deposited bed's free surface: the level at which the solid fraction of
+    horizontal sections falls for the last time to half of the bed's own, the bed's being its
+    mean from 5 to 2 mean radii below the highest centre.
+
+    ``z`` and ``radius`` are the centre heights and radii of the grains whose centre lies in a
+    footprint of ``area`` [m^2] (e.g. a central cylinder, away from the walls); a section's
+    solid fraction is the grains' cross-section area in it over ``area``. For a bed cut where
+    the grain centres pass a height (what :func:`build` does at every layer top) this level is
+    that height to within a fraction of a radius; for a bed whose grains' tops were cut, about
+    a radius lower. "The last time" matters: a regular bed's fraction dips between its tiers.
+    Applied to the grains of the lower layer of a layered bed it gives the interface.
+    """
+    z = np.asarray(z, dtype=float)
+    r = np.asarray(radius, dtype=float)
+    if z.shape != r.shape or z.ndim != 1:
+        raise ValueError(f"free_surface_height: z {z.shape} and radius {r.shape} must be "
+                         "equal-length vectors")
+    if len(z) < 10:
+        raise ValueError(f"free_surface_height: {len(z)} grains in the footprint; need at least 10")
+    if not area > 0.0:
+        raise ValueError(f"free_surface_height: area={area!r}: must be > 0 [m^2]")
+    r_mean = float(np.mean(r))
+
+    def solid(level: float) -> float:
+        d = np.abs(z - level)
+        m = d < r
+        return float(np.sum(math.pi * (r[m] ** 2 - d[m] ** 2))) / area
+
+    z_top = float(np.max(z))
+    lo = max(z_top - 5.0 * r_mean, float(np.min(z)))
+    bulk = float(np.mean([solid(h) for h in np.linspace(lo, z_top - 2.0 * r_mean, 31)]))
+    zs = np.linspace(z_top - 2.0 * r_mean, float(np.max(z + r)), 241)
+    f = np.array([solid(h) for h in zs]) - 0.5 * bulk
+    k = int(np.nonzero(f >= 0.0)[0][-1]) if np.any(f >= 0.0) else 0
+    if k == len(zs) - 1:
+        return float(zs[k])
+    return float(zs[k] + (zs[k + 1] - zs[k]) * f[k] / (f[k] - f[k + 1]))
+
+
 # ---------------------------------------------------------------------------------------------
 # Gravity deposition
 # ---------------------------------------------------------------------------------------------
@@ -1690,6 +1730,15 @@ def _layer_cloud(spec, r_new, seed, up, planes, h_surf, normal_mode):
     )
 
 
+def _in_footprint(region: Region, x: np.ndarray) -> np.ndarray:
+    """Whether each centre lies in the horizontal footprint of a box or an upright cylinder."""
+    if isinstance(region, CylinderRegion):
+        cx, cy = region.center
+        return np.hypot(x[:, 0] - cx, x[:, 1] - cy) < region.radius
+    lo, hi = region.lo, region.hi
+    return (x[:, 0] > lo[0]) & (x[:, 0] < hi[0]) & (x[:, 1] > lo[1]) & (x[:, 1] < hi[1])
+
+
 def _trough_volume(spec, region, h_min) -> float:
     """Volume of ``region`` inside the slope trough above height ``h_min`` (Monte Carlo, 4096
     deterministic points: only used to size a cloud)."""
@@ -1707,10 +1756,12 @@ def build(spec: PackingSpec, progress=None) -> Packing:
     """Deposit the layers of ``spec`` one after the other and carve flat tops (and the slope).
 
     For each layer, bottom to top: a lattice cloud with about 12 % more particles than the layer
-    needs at porosity 0.36 is placed just above the current surface, the whole bed is deposited
-    (:func:`deposit`) with the layer's deposition friction, and the particles whose centre lies
-    above the layer top are removed; if the layer came out short, more particles are added.  The
-    result is a sharp interface at each layer top.  With a slope, the particles above the
+    needs at porosity 0.36 between the carved top of the layer below and its own top is placed
+    just above the current surface, the whole bed is deposited (:func:`deposit`) with the
+    layer's deposition friction, and the particles whose centre lies above the layer top are
+    removed; if the layer came out short, more particles are added.  The result is a sharp
+    interface at each layer top, and each layer as thick as specified to a fraction of a grain
+    radius (:func:`free_surface_height`), down to a layer one grain diameter thick.  With a slope, the particles above the
     inclined plane are then removed (``compaction="horizontal"``), or the whole procedure runs
     with gravity along the inward slope normal in a trough formed by the floor and the back
     wall (``compaction="normal"``).
@@ -1761,13 +1812,17 @@ def build(spec: PackingSpec, progress=None) -> Packing:
         attempt = 0
         while True:
             h_surf = float(np.max((x @ up) + r)) if len(r) else (tops[k - 1] if k else base)
+            # the level the new grains fill up from: the carved top of the layer below (its
+            # mean surface) on the first attempt, not its highest grain, which stands up to a
+            # grain above it (filling from there left thin layers a grain short)
+            h_fill = (tops[k - 1] if k else base) if attempt == 0 else h_surf
             if normal_mode:
                 # right-angle trough (floor + back wall): the section below height h (along up,
                 # from the corner) is a right triangle of area h^2 / sin(2 alpha)
-                a0, a1 = h_surf - base, h_top - base
+                a0, a1 = h_fill - base, h_top - base
                 vol = max(a1 * a1 - a0 * a0, 0.0) * width_y / math.sin(2.0 * spec.slope.angle)
             else:
-                vol = c.area * max(h_top - h_surf, 0.0)
+                vol = c.area * max(h_top - h_fill, 0.0)
             n_new = int(math.ceil(_OVERFILL * vol * (1 - _FILL_POROSITY) / dist.mean_volume))
             n_new = max(n_new, 1)
             seed_k = int(seeds[k * 8 + attempt].generate_state(1)[0])
@@ -1836,6 +1891,16 @@ def build(spec: PackingSpec, progress=None) -> Packing:
                 continue
             info["porosity"] = (
                 porosity(x, r, _interior_region(spec, z0, z1, r_max)) if z1 > z0 else float("nan")
+            )
+        # the level each layer's top is realised at (its grains and those below it, away from
+        # the walls; free_surface_height), next to the requested "top"
+        foot = spec.container.shrunk(2.0 * r_max)
+        inside = _in_footprint(foot, x)
+        for k, info in enumerate(info_layers):
+            sel = inside & (layer_id <= k)
+            info["realised_top"] = (
+                free_surface_height(x[sel, 2], r[sel], foot.area)
+                if spec.slope is None and sel.sum() >= 10 else float("nan")
             )
         region = _interior_region(spec, base + 2.0 * r_max, tops[-1] - r_max, r_max)
         por = porosity(x, r, region) if spec.slope is None else float("nan")

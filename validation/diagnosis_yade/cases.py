@@ -94,31 +94,15 @@ def bed_surface(x: np.ndarray, radius: np.ndarray,
     this kind. The Yade truth removes the grains whose *top* passes the drawn bed depth, so its
     surface lies about a grain radius lower than drawn (measured: beds drawn at 0.764 / 0.825 /
     2.0 m with 0.114 / 0.088 m grains have their surface at 0.637 / 0.732 / 1.909-1.912 m)."""
+    from soil.packing import free_surface_height
+
     x = np.asarray(x, float)
     r = np.asarray(radius, float)
     inside = np.hypot(x[:, 0], x[:, 1]) < within
     if inside.sum() < 10:
         raise ValueError(f"bed_surface: {int(inside.sum())} grains within {within:g} m of the "
                          f"axis; need at least 10")
-    xc, rc = x[inside, 2], r[inside]
-    r_mean = float(np.mean(rc))
-    area = math.pi * within ** 2
-
-    def solid(z: float) -> float:
-        d = np.abs(xc - z)
-        m = d < rc
-        return float(np.sum(math.pi * (rc[m] ** 2 - d[m] ** 2))) / area
-
-    z_top = float(np.max(xc))
-    lo = max(z_top - 5.0 * r_mean, float(np.min(xc)))
-    bulk = float(np.mean([solid(z) for z in np.linspace(lo, z_top - 2.0 * r_mean, 31)]))
-    zs = np.linspace(z_top - 2.0 * r_mean, float(np.max(xc + rc)), 241)
-    f = np.array([solid(z) for z in zs]) - 0.5 * bulk
-    # the highest section at or above half (a layered bed's fraction also dips between layers)
-    k = int(np.nonzero(f >= 0.0)[0][-1]) if np.any(f >= 0.0) else 0
-    if k == len(zs) - 1:
-        return float(zs[k])
-    return float(zs[k] + (zs[k + 1] - zs[k]) * f[k] / (f[k] - f[k + 1]))
+    return free_surface_height(x[inside, 2], r[inside], math.pi * within ** 2)
 
 
 def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,

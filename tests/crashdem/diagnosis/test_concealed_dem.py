@@ -13,7 +13,7 @@ baseline numerics; the layering and floor levels deposit their own beds once).
 The diagnosis is the full method: ROM screening calibrated to (and anchored on) the baseline
 simulation, then ``screen_then_confirm`` with the real DEM (``generator_dem.DemFullSimulator``)
 for the top ``TOP_K`` candidates and the full-model search over the soil effects
-(``catalogue.DROP_FULL_SEARCH``: 23 levels plus one refinement run; the 11 floor and
+(``catalogue.DROP_FULL_SEARCH``: 24 levels plus one refinement run; the 12 floor and
 interface levels each on 5 beds, ``confirm.LEVEL_BEDS``), judged against the realisation floor
 of 4 replicate packings of the baseline (``generator_dem.replicates``).
 
@@ -54,17 +54,15 @@ NULL_SEEDS = (21, 22)
 TOP_K = 2
 
 
-GAP = ("DEM truth, measured with the full-model search (2026-11-22, session 7): 10/12 effect "
-       "cases named, no wrong name, cohesion 0/2 (seed 11: contact damping and cohesion fit "
-       "no better than a replicate packing of the baseline, Delta BIC 18.9 / 18.3 against 28.8; "
-       "seed 12 below the null level); layering depth 26 / 32 % short (0.20 / 0.195 m for 0.269 / "
-       "0.288 m; 13 / 30 % with one bed per level, about one grain radius at r = 0.10 m), floor "
-       "depth +1.6 % (seed 12) and -7.4 % (seed 11; +36 % with one bed per level); final "
-       "scores 0.55-0.94, capped near the 0.82-0.89 that two DEM packings of the same physics "
-       "score against each other; the same with the realisation floor of 4 replicate packings "
-       "(session 8); the concealed cohesions (1.2-1.3e5 Pa) move the model less than another "
-       "packing does (separation 0.1 against 1.4, fit.detectability; session 10); see "
-       "docs/diagnosis.md 'Validation on DEM truth' and 'Detectability'")
+GAP = ("DEM truth, measured with the full-model search (session 21, 2026-12-01): 10/12 effect "
+       "cases named, no wrong name, cohesion 0/2 (the concealed 1.2-1.3e5 Pa move the model "
+       "less than another packing does: separation 0.1 against 1.4, fit.detectability; "
+       "session 10); layering depth 0.25 / 0.20 m for 0.269 / 0.288 m (-7 / -30 %; the second "
+       "truth's grains are 11 % larger, and at 1.1 x the baseline's radius the same levels "
+       "place it at 0.307 m), floor depth -7.4 / +1.6 %; final scores 0.55-0.94, capped near "
+       "the 0.82-0.89 that two DEM packings of the same physics score against each other "
+       "(floor 12 0.839, mount 11 0.548, speeds 0.86-0.88); see docs/diagnosis.md 'Validation "
+       "on DEM truth', 'Layers as thick as specified' and 'Detectability'")
 
 
 @pytest.fixture(scope="session")
@@ -282,7 +280,8 @@ def test_named_search_value_uncertainty_counts_the_packing(dem_runs, tmp_path):
     shift (the named effect's levels rerun with the grain radius x0.9 and x1.1). On the
     DEM-truth depths (layering, floor) the truth lies fewer of these uncertainties from the
     named value than of the noise's and of the interval's (measured RMS over the four: 3.41
-    noise, 1.64 interval, 0.86 with the numerics check); ``report.md`` states both."""
+    noise, 1.64 interval, 0.86 with the numerics check; 3.18 / 0.96 / 0.42 since session 21's
+    layered beds and 0.25 m layering level); ``report.md`` states both."""
     from crashdem.diagnosis import write_report
 
     z_noise, z_interval, z_now = [], [], []
