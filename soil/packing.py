@@ -1809,13 +1809,14 @@ def build(spec: PackingSpec, progress=None) -> Packing:
     width_y = c.hi[1] - c.lo[1]
     for k, layer in enumerate(spec.layers):
         h_top = tops[k]
+        carved = tops[k - 1] if k else base  # the carved top of the layer below
         attempt = 0
         while True:
-            h_surf = float(np.max((x @ up) + r)) if len(r) else (tops[k - 1] if k else base)
-            # the level the new grains fill up from: the carved top of the layer below (its
-            # mean surface) on the first attempt, not its highest grain, which stands up to a
-            # grain above it (filling from there left thin layers a grain short)
-            h_fill = (tops[k - 1] if k else base) if attempt == 0 else h_surf
+            h_surf = float(np.max((x @ up) + r)) if len(r) else carved
+            # the level the new grains fill up from: the carved top below (its mean surface)
+            # on the first attempt, not its highest grain, which stands up to a grain above it
+            # (filling from there left thin layers a grain short)
+            h_fill = carved if attempt == 0 else h_surf
             if normal_mode:
                 # right-angle trough (floor + back wall): the section below height h (along up,
                 # from the corner) is a right triangle of area h^2 / sin(2 alpha)
@@ -1880,27 +1881,26 @@ def build(spec: PackingSpec, progress=None) -> Packing:
         x, r, layer_id = x[keep], r[keep], layer_id[keep]
     material = np.array([spec.layers[k].material for k in layer_id], dtype=np.int32)
 
-    # porosity of each layer (interior control volume, one r_max away from the layer tops)
+    # porosity of each layer (interior control volume, one r_max away from the layer tops) and
+    # the level its top is realised at (its grains and those below it, away from the walls;
+    # free_surface_height), next to the requested "top"
     if not normal_mode:
         bottoms = [base] + tops[:-1]
-        for k, info in enumerate(info_layers):
-            z0 = bottoms[k] + (2.0 * r_max if k == 0 else r_max)
-            z1 = tops[k] - r_max
-            if spec.slope is not None:
-                info["porosity"] = float("nan")
-                continue
-            info["porosity"] = (
-                porosity(x, r, _interior_region(spec, z0, z1, r_max)) if z1 > z0 else float("nan")
-            )
-        # the level each layer's top is realised at (its grains and those below it, away from
-        # the walls; free_surface_height), next to the requested "top"
         foot = spec.container.shrunk(2.0 * r_max)
         inside = _in_footprint(foot, x)
         for k, info in enumerate(info_layers):
+            if spec.slope is not None:
+                info["porosity"] = info["realised_top"] = float("nan")
+                continue
+            z0 = bottoms[k] + (2.0 * r_max if k == 0 else r_max)
+            z1 = tops[k] - r_max
+            info["porosity"] = (
+                porosity(x, r, _interior_region(spec, z0, z1, r_max)) if z1 > z0 else float("nan")
+            )
             sel = inside & (layer_id <= k)
             info["realised_top"] = (
-                free_surface_height(x[sel, 2], r[sel], foot.area)
-                if spec.slope is None and sel.sum() >= 10 else float("nan")
+                free_surface_height(x[sel, 2], r[sel], foot.area) if sel.sum() >= 10
+                else float("nan")
             )
         region = _interior_region(spec, base + 2.0 * r_max, tops[-1] - r_max, r_max)
         por = porosity(x, r, region) if spec.slope is None else float("nan")
