@@ -55,3 +55,21 @@ def test_the_script_refuses_a_malformed_recalibration(argv, capsys):
     with pytest.raises(SystemExit) as ex:
         main(argv)
     assert ex.value.code == 2 and "--recalibrate" in capsys.readouterr().err
+
+
+def test_the_ratio_is_taken_on_the_baseline_run_of_the_same_diagnosis(tmp_path):
+    """``baseline_wall``: the wall time of the full run the diagnosis made of the scenario
+    itself (its result file's ``wall_time``), the same-run reference of the benchmark's ratio;
+    None without such a run (an existing result was used) or with a run that recorded none."""
+    import h5py
+
+    from validation.diagnose_cost import baseline_wall
+
+    assert baseline_wall(tmp_path) is None
+    (tmp_path / "baseline").mkdir()
+    with h5py.File(tmp_path / "baseline" / "a.h5", "w") as f:
+        f.attrs["wall_time"] = float("nan")  # a run killed before it finished
+    assert baseline_wall(tmp_path) is None
+    with h5py.File(tmp_path / "baseline" / "b.h5", "w") as f:
+        f.attrs["wall_time"] = 42.5
+    assert baseline_wall(tmp_path) == 42.5

@@ -14,6 +14,9 @@ soil_layering          grains deeper than 0.25-0.40 m get 4-8 x the Young's modu
 boundary_proximity     a bed of 0.75-0.90 m instead of 2 m (the floor nearer)
 cohesion               ``CohFrictMat`` bonded bed, normal = shear cohesion 1-3e5 Pa
 particle_rotation      free grain rotations, no rolling resistance (crashdem: blocked)
+contact_damping        ``FrictViscoMat`` grains: a normal dashpot of restitution 0.1-0.3 on
+                       every grain contact (``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco``,
+                       whose dashpot may pull; crashdem's contact force never does)
 initial_conditions     impact speed offset +-2.5-4 m/s
 sensor_dynamics        the acceleration seen through ``MountDynamics`` 40-90 Hz, zeta
                        0.05-0.15, model "lowpass" or "mount"
@@ -56,6 +59,7 @@ YADE_EFFECT_DRAWS: dict[str, dict[str, tuple[float, float, str]]] = {
     "boundary_proximity": {"bed_depth": (0.75, 0.90, "lin")},
     "cohesion": {"cohesion": (1.0e5, 3.0e5, "log")},
     "particle_rotation": {},
+    "contact_damping": {"restitution": (0.1, 0.3, "lin")},
     "initial_conditions": {"speed_offset": (2.5, 4.0, "lin")},
     "sensor_dynamics": {"natural_frequency": (40.0, 90.0, "log"),
                         "damping_ratio": (0.05, 0.15, "lin")},
@@ -67,12 +71,13 @@ FIXED_LIMITS: dict[str, tuple[float, float, str]] = {
     "layer_depth": (0.0, 1.5, "m"), "layer_young_factor": (0.0, 100.0, "1"),
     "bed_depth": (0.3, 2.0, "m"), "cohesion": (0.0, 1.0e8, "Pa"),
     "speed_offset": (-10.0, 10.0, "m/s"), "natural_frequency": (1.0, 2000.0, "Hz"),
-    "damping_ratio": (0.0, 2.0, "1"),
+    "damping_ratio": (0.0, 2.0, "1"), "restitution": (0.0, 1.0, "1"),
 }
 #: drawn parameter -> ROM parameter with the same meaning (compared by the validation); the
 #: two depths are compared as the Yade bed realises them (``realised_depths``), not as drawn
 COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
-            "speed_offset": "speed_offset", "natural_frequency": "mount_frequency"}
+            "speed_offset": "speed_offset", "natural_frequency": "mount_frequency",
+            "restitution": "restitution"}
 #: radius [m] of the central cylinder of the 1 m tank whose sections locate a bed's free
 #: surface (``bed_surface``): the 0.45 m sphere's footprint and a grain ring, clear of the wall
 SURFACE_REGION_RADIUS = 0.7
@@ -276,6 +281,8 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         "layer_young_factor": drawn.get("layer_young_factor", 1.0),
         "free_rotation": bool(drawn.get("free_rotation", False)),
     }
+    if "restitution" in drawn:  # only then: the other cases' configurations stay as they were
+        cfg["restitution"] = float(drawn["restitution"])
     hist, info = run_yade(cfg, cache)
     t, vz, fz = hist[:, 0], hist[:, 2], hist[:, 3]
     k_c = int(np.argmax(fz > 0.0))  # first step with a contact force

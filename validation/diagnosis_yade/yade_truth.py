@@ -8,9 +8,12 @@ Yade 2023.02a's own numerics, from its own deposition to its own contact laws:
    (``NewtonIntegrator.damping``) until the unbalanced force falls below ``deposit_unbalanced``,
    the grains above ``bed_depth`` removed, settled again; positions and radii saved;
 2. impact on a fresh scene: a ``utils.wall`` floor, a facet cylinder, the grains (``FrictMat``,
-   or ``CohFrictMat`` bonded at the first step when ``cohesion`` is given), the drop mass (a
-   sphere of the impactor material); Cundall-Strack law (``Law2_ScGeom_FrictPhys_CundallStrack``
-   or ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment``), no damping, rotations blocked unless
+   ``CohFrictMat`` bonded at the first step when ``cohesion`` is given, or ``FrictViscoMat``
+   with a normal dashpot of ``betan`` x critical when ``restitution`` is given), the drop mass
+   (a sphere of the impactor material); Cundall-Strack law
+   (``Law2_ScGeom_FrictPhys_CundallStrack``, ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment`` or
+   ``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco``: the same springs plus the dashpot, whose
+   force may pull while a contact opens), no other damping, rotations blocked unless
    ``free_rotation``; the grains deeper than ``layer_depth`` get ``layer_young_factor`` x E;
    ``O.dt = dt_factor * PWaveTimeStep()``;
 3. the history (t, z, vz, Fz) of the drop mass every step -> ``<out>.npy`` (+ ``.json`` facts).
@@ -37,7 +40,13 @@ r_mean = cfg["radius"]
 g = cfg["gravity"]
 
 
-def frict(young, density, phi, coh=None):
+def frict(young, density, phi, coh=None, betan=None):
+    if betan is not None:
+        # Cundall-Strack springs (kn, ks as FrictPhys) + normal dashpot cn = betan * 2 sqrt(m* kn);
+        # a pair takes the nonzero betan of its two materials
+        return O.materials.append(FrictViscoMat(  # noqa: F821
+            young=young, poisson=cfg["stiffness_ratio"], frictionAngle=phi, density=density,
+            betan=betan))
     if coh is None:
         return O.materials.append(FrictMat(  # noqa: F821 (Yade builtins)
             young=young, poisson=cfg["stiffness_ratio"], frictionAngle=phi, density=density))
@@ -102,15 +111,21 @@ if not os.path.exists(cfg["packing_npz"]):
 data = np.load(cfg["packing_npz"])
 x, rad = data["x"], data["radius"]
 coh = cfg.get("cohesion")
-m_up = frict(cfg["young"], cfg["density"], cfg["friction_angle"], coh)
+e = cfg.get("restitution")
+# damping ratio of a linear spring-dashpot with restitution e (exact for a contact that may pull)
+beta = None if e is None else -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e) ** 2)
+# with a dashpot every material is a FrictViscoMat (the wall and the drop mass undamped, betan 0):
+# Yade's mixed FrictMat-FrictViscoMat functor takes the bodies in one order only
+other = None if beta is None else 0.0
+m_up = frict(cfg["young"], cfg["density"], cfg["friction_angle"], coh, beta)
 m_low = m_up
 if cfg.get("layer_depth") is not None:
     m_low = frict(cfg["young"] * cfg["layer_young_factor"], cfg["density"], cfg["friction_angle"],
-                  coh)
-m_wall = frict(cfg["young"], cfg["density"], cfg["friction_angle"])
+                  coh, beta)
+m_wall = frict(cfg["young"], cfg["density"], cfg["friction_angle"], betan=other)
 R = cfg["drop_radius"]
 rho_imp = cfg["drop_mass"] / (4.0 / 3.0 * math.pi * R ** 3)
-m_imp = frict(cfg["impactor_young"], rho_imp, 0.0)
+m_imp = frict(cfg["impactor_young"], rho_imp, 0.0, betan=other)
 tank(m_wall)
 surface = float(np.max(x[:, 2] + rad))
 z_layer = surface - cfg["layer_depth"] if cfg.get("layer_depth") is not None else -1.0
@@ -127,7 +142,11 @@ drop = utils.sphere((0.0, 0.0, top + R + cfg["gap"]), R, material=m_imp)  # noqa
 drop.state.blockedDOFs = "XYZ"
 drop.state.vel = Vector3(0.0, 0.0, -cfg["impact_speed"])  # noqa: F821
 did = O.bodies.append(drop)  # noqa: F821
-if coh is None:
+if beta is not None:
+    ig2 = [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
+    ip2 = [Ip2_FrictViscoMat_FrictViscoMat_FrictViscoPhys()]  # noqa: F821
+    law = [Law2_ScGeom_FrictViscoPhys_CundallStrackVisco()]  # noqa: F821
+elif coh is None:
     ig2 = [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
     ip2 = [Ip2_FrictMat_FrictMat_FrictPhys()]  # noqa: F821
     law = [Law2_ScGeom_FrictPhys_CundallStrack()]  # noqa: F821

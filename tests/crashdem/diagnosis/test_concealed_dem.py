@@ -207,13 +207,14 @@ N_SEARCH_RUNS = sum(len(fs.values) * (N_BEDS if fs.deposits else 1)
 
 
 def test_dem_diagnosis_cost(dem_runs):
-    """Screening plus full-DEM confirmation and search of one recording stays far below the
-    15 min budget and needs at most 1 + TOP_K full simulations for the candidates plus the
-    search's levels (a floor or interface level on each of its N_BEDS beds), one refinement
-    (on N_BEDS beds when deposited) and the replicates (none of these when the model-free
-    sensor check answers)."""
-    for c, r, _, td in dem_runs:
-        assert td < 300.0, (c.effect, c.seed, td)
+    """The cost of one diagnosis in full simulations: at most 1 + TOP_K for the candidates plus
+    the search's levels (a floor or interface level on each of its N_BEDS beds), one
+    refinement (on N_BEDS beds when deposited) and the replicates (none of these when the
+    model-free sensor check answers). The wall time is printed with the confusion table, not
+    asserted (a timed test fails on a loaded machine, not on slow code): the 15-minute budget
+    is measured by ``validation/diagnose_cost.py``, which times the command at the scenario's
+    own resolution against the full runs of the same diagnosis."""
+    for c, r, _, _ in dem_runs:
         n = r.simulations["full_simulations"]
         assert 1 <= n <= 1 + TOP_K + N_SEARCH_RUNS + N_BEDS + N_REPLICATES, (c.effect, c.seed, n)
         if "full_search" in r.fit:
