@@ -23,8 +23,8 @@ user's next recording of the same scenario: no bed deposited) and its answer is 
 against the first's. The budget is absolute (15 min); the ratio printed beside it is the
 diagnosis's wall time over that of the one full simulation of the scenario it ran itself (its
 baseline's impact, deposition excluded, measured in the same run on the same machine), i.e.
-its cost in full runs. The LAST
-line is JSON: wall times, the ratio, the answer, its parameters and the run counts.
+its cost in full runs. The LAST line is JSON: wall times, the ratio, the answer, its
+parameters and the run counts.
 """
 from __future__ import annotations
 

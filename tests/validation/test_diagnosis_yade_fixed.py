@@ -181,13 +181,13 @@ def test_a_recalibrated_yade_bed_changes_only_its_soil_value(monkeypatch, tmp_pa
 
 def test_contact_damping_hands_its_restitution_to_yade_alone(monkeypatch, tmp_path):
     """The Yade contact-damping truth hands Yade a restitution from its span (the grains become
-    ``FrictViscoMat``); the other cases' configurations carry no such key, so their Yade runs
-    are keyed as before; a pinned restitution outside (0, 1] is refused by name."""
+    ``FrictViscoMat``); the other cases hand none (no dashpot); a pinned restitution outside
+    (0, 1] is refused by name."""
     damped = _cfg(monkeypatch, tmp_path, 11, "contact_damping")
     lo, hi, _ = cases.YADE_EFFECT_DRAWS["contact_damping"]["restitution"]
     assert lo <= damped["restitution"] <= hi
     for effect in (None, "cohesion", "particle_rotation"):
-        assert "restitution" not in _cfg(monkeypatch, tmp_path, 11, effect)
+        assert _cfg(monkeypatch, tmp_path, 11, effect)["restitution"] is None
     pinned = _cfg(monkeypatch, tmp_path, 11, "contact_damping", fixed={"restitution": 0.5})
     assert pinned["restitution"] == 0.5
     assert cases.COMPARED["restitution"] == "restitution"

@@ -280,9 +280,8 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         "cohesion": drawn.get("cohesion"), "layer_depth": drawn.get("layer_depth"),
         "layer_young_factor": drawn.get("layer_young_factor", 1.0),
         "free_rotation": bool(drawn.get("free_rotation", False)),
+        "restitution": drawn.get("restitution"),
     }
-    if "restitution" in drawn:  # only then: the other cases' configurations stay as they were
-        cfg["restitution"] = float(drawn["restitution"])
     hist, info = run_yade(cfg, cache)
     t, vz, fz = hist[:, 0], hist[:, 2], hist[:, 3]
     k_c = int(np.argmax(fz > 0.0))  # first step with a contact force

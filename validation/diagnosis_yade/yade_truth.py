@@ -142,16 +142,16 @@ drop = utils.sphere((0.0, 0.0, top + R + cfg["gap"]), R, material=m_imp)  # noqa
 drop.state.blockedDOFs = "XYZ"
 drop.state.vel = Vector3(0.0, 0.0, -cfg["impact_speed"])  # noqa: F821
 did = O.bodies.append(drop)  # noqa: F821
+# grain-grain geometry with the rotations the cohesion moments need; wall and facet contacts alike
+ig2 = [Ig2_Sphere_Sphere_ScGeom() if coh is None else Ig2_Sphere_Sphere_ScGeom6D(),  # noqa: F821
+       Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
 if beta is not None:
-    ig2 = [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
     ip2 = [Ip2_FrictViscoMat_FrictViscoMat_FrictViscoPhys()]  # noqa: F821
     law = [Law2_ScGeom_FrictViscoPhys_CundallStrackVisco()]  # noqa: F821
 elif coh is None:
-    ig2 = [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
     ip2 = [Ip2_FrictMat_FrictMat_FrictPhys()]  # noqa: F821
     law = [Law2_ScGeom_FrictPhys_CundallStrack()]  # noqa: F821
 else:
-    ig2 = [Ig2_Sphere_Sphere_ScGeom6D(), Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
     ip2 = [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys(setCohesionNow=True,  # noqa: F821
                                                     setCohesionOnNewContacts=False),
            Ip2_FrictMat_FrictMat_FrictPhys()]  # noqa: F821
