@@ -175,11 +175,16 @@ def _rotations_blocked(scen: Scenario) -> bool:
     return not (scen["soil.rotation"] == "free" or scen["physics.particle_rotation.enabled"])
 
 
+def _container_top(scen: Scenario) -> float:
+    """Height of the drop tank's walls [m]: the soil depth plus at least 2 m of freeboard."""
+    depth = soil_depth(scen)
+    return depth + max(2.0, depth)
+
+
 def _container_boundary(scen: Scenario, packing, wall_material: int):
     import soil
 
-    depth = soil_depth(scen)
-    top = depth + max(2.0, depth)
+    top = _container_top(scen)
     if scen["container.shape"] == "cylinder":
         shapes = [soil.Plane((0.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
                   soil.Cylinder((0.0, 0.0), 0.5 * scen["container.diameter"], 0.0, top)]
@@ -256,6 +261,10 @@ def build_model(scen: Scenario, cache_dir: str | os.PathLike, progress=None) -> 
     from soil import packing as pk
 
     if scen["scenario.kind"] == "glider_crash":
+        if scen["soil.packing_file"]:
+            raise ScenarioError(f"soil.packing_file={scen['soil.packing_file']!r}: an imported "
+                                "bed is supported for scenario.kind='drop_test' only (the "
+                                "glider's container deposits its sloped bed)")
         try:
             from crashdem.glider import build_glider_model
         except ImportError:  # pragma: no cover - the glider module ships with the package
@@ -265,7 +274,12 @@ def build_model(scen: Scenario, cache_dir: str | os.PathLike, progress=None) -> 
         raise ScenarioError("physics.structural_crush.enabled=true: needs a crushable-nose body "
                             "(glider); the drop sphere is rigid by definition")
     spec_p = packing_spec(scen)
-    packing = pk.cached(spec_p, cache_dir)
+    if scen["soil.packing_file"]:
+        from crashdem.beds import imported_packing
+
+        packing = imported_packing(scen, spec_p, _container_top(scen))
+    else:
+        packing = pk.cached(spec_p, cache_dir)
     mats = impact_materials(scen, packing)
     wall_mat, imp_mat = len(packing.materials), len(packing.materials) + 1
     particles = soil.Particles(x=packing.x, radius=packing.radius, material=packing.material,
@@ -557,6 +571,9 @@ def _run_scenario(scen: Scenario, path: Path, progress: bool, resume: bool,
             "wall_s": time.perf_counter() - wall0}
     if saved is not None:
         info["resumed_from_t"] = float(saved.t)
+    if m.packing.info.get("source") == "imported":
+        info.update(packing_file=m.packing.info["packing_file"],
+                    packing_file_sha256=m.packing.info["packing_file_sha256"])
     _write_run_info(path, info)
     if plots if plots is not None else scen["output.plots"]:
         from crashdem.plotting import plot_result

@@ -173,6 +173,7 @@ SCHEMA: dict[str, Any] = {
         "deposition_friction_deg": F(None, "deg", 0, 90, hi_open=True, doc="friction during deposition (null = material value)", nullable=True),
         "material": dict(MATERIAL),
         "restitution": F(None, "1", 0, 1, lo_open=True, doc="viscous normal damping from a restitution coefficient (null = off, thesis)", nullable=True),
+        "packing_file": S("", doc="bed imported instead of deposited (drop tests): .npz with x (N,3) and radius (N,) [m], or text rows 'x y z r' [m] (Yade export.text); floor at z = 0, tank on the z axis; empty = deposit (crashdem.beds)"),
     },
     "container": {
         "shape": C("cylinder", "cylinder", "box", doc="test tank (cylinder) or box container"),

@@ -316,5 +316,6 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
                      "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw,
-                     "realised": realised},
+                     "realised": realised, "packing_npz": info["packing_npz"],
+                     "tank_radius": cfg["tank_radius"]},
                     recal)

@@ -1,0 +1,153 @@
+"""Beds imported from a file (``soil.packing_file``) instead of deposited by crashdem.
+
+A crash engineer often has the bed already: deposited by another DEM code (Yade's
+``export.text`` / ``SpherePack.save``, a LIGGGHTS dump reduced to centres and radii) or by an
+earlier crashdem run. Running the impact on *that* bed compares like with like: what then
+differs between two codes is their contact laws, integrators and boundaries, not their
+depositions (``validation/diagnosis_yade/same_bed.py`` does this against Yade).
+
+Formats (SI, metres):
+
+* ``.npz``: arrays ``x`` (N, 3) centres and ``radius`` (N,) (as ``numpy.savez`` writes them);
+* anything else: text, one grain per row ``x y z r`` separated by blanks or commas; ``#`` starts
+  a comment (Yade's ``#format x_y_z_r`` header is one).
+
+The bed stands in the scenario's container as given: its floor at z = 0, a cylinder tank
+centred on the z axis, a box centred on the origin. Every grain must lie inside the container
+(a grain may overlap a wall by ``WALL_OVERLAP`` of its radius, the contact overlap a settled bed
+has against its walls); the first grain outside is named in the error. The grains take the
+scenario's soil material; with ``physics.soil_layering`` on, those whose centre lies deeper than
+``physics.soil_layering.depth`` below the bed's top take the lower layer's material.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from crashdem.scenario import Scenario, ScenarioError
+
+#: overlap of a grain with a container wall or the floor accepted in an imported bed, as a
+#: fraction of its radius (a settled bed presses its walls by well under 1 %; a grain past this
+#: has escaped the container or the bed belongs to another one)
+WALL_OVERLAP = 0.05
+
+FIELD = "soil.packing_file"
+
+
+def read_bed(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (N, 3) and radii (N,) [m] of the bed file ``path`` (formats: module docstring).
+
+    Raises ``ScenarioError`` naming ``soil.packing_file`` when the file is missing, unreadable
+    or holds no valid grains (non-finite values, radius <= 0, a wrong shape)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ScenarioError(f"{FIELD}={str(path)!r}: no such file (give an .npz with x (N,3) and "
+                            "radius (N,) [m], or a text file of rows 'x y z r' [m])")
+    try:
+        if p.suffix.lower() == ".npz":
+            with np.load(p, allow_pickle=False) as z:
+                missing = [k for k in ("x", "radius") if k not in z.files]
+                if missing:
+                    raise ScenarioError(f"{FIELD}={str(path)!r}: the .npz has no array "
+                                        f"{missing[0]!r} (needs x (N,3) and radius (N,) [m]; "
+                                        f"it has {sorted(z.files)})")
+                x = np.asarray(z["x"], dtype=np.float64)
+                r = np.asarray(z["radius"], dtype=np.float64)
+        else:
+            rows = np.loadtxt(p, comments="#", delimiter=_delimiter(p), ndmin=2)
+            if rows.shape[1] != 4:
+                raise ScenarioError(f"{FIELD}={str(path)!r}: rows of {rows.shape[1]} columns; "
+                                    "each row must be 'x y z r' [m]")
+            x, r = rows[:, :3].copy(), rows[:, 3].copy()
+    except ScenarioError:
+        raise
+    except (OSError, ValueError) as e:
+        raise ScenarioError(f"{FIELD}={str(path)!r}: cannot be read as a bed ({e})") from None
+    if x.ndim != 2 or x.shape[1] != 3 or r.shape != (x.shape[0],) or len(r) == 0:
+        raise ScenarioError(f"{FIELD}={str(path)!r}: x must be (N, 3) and radius (N,) with "
+                            f"N >= 1; got x {x.shape} and radius {r.shape}")
+    bad = ~(np.all(np.isfinite(x), axis=1) & np.isfinite(r) & (r > 0.0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise ScenarioError(f"{FIELD}={str(path)!r}: grain {i} has centre {x[i].tolist()} and "
+                            f"radius {r[i]!r}; centres must be finite and radii > 0 [m]")
+    return x, r
+
+
+def _delimiter(p: Path) -> str | None:
+    """',' when the first data row of the text file ``p`` has commas, else blanks."""
+    with open(p, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            s = line.split("#", 1)[0].strip()
+            if s:
+                return "," if "," in s else None
+    return None
+
+
+def _outside(scen: Scenario, x: np.ndarray, r: np.ndarray, top: float) -> tuple[int, str] | None:
+    """The first grain of the bed outside the scenario's container (index, how), or None."""
+    tol = WALL_OVERLAP * r
+    below = x[:, 2] - r < -tol
+    if below.any():
+        i = int(np.argmax(below))
+        return i, f"below the floor (z - r = {x[i, 2] - r[i]:.4g} m, allowed >= 0)"
+    if scen["container.shape"] == "cylinder":
+        R = 0.5 * scen["container.diameter"]
+        rad = np.hypot(x[:, 0], x[:, 1]) + r
+        out = rad - R > tol
+        if out.any():
+            i = int(np.argmax(out))
+            return i, (f"outside the tank wall (distance from the axis + r = {rad[i]:.4g} m, "
+                       f"allowed <= container.diameter/2 = {R:g} m)")
+    else:
+        half = np.array([0.5 * scen["container.length"], 0.5 * scen["container.width"]])
+        reach = np.abs(x[:, :2]) + r[:, None]
+        out = np.any(reach - half > tol[:, None], axis=1)
+        if out.any():
+            i = int(np.argmax(out))
+            return i, (f"outside the box (|x|, |y| + r = {reach[i].tolist()} m, allowed <= "
+                       f"container.length/2, container.width/2 = {half.tolist()} m)")
+    high = x[:, 2] + r > top
+    if high.any():
+        i = int(np.argmax(high))
+        return i, f"above the container's top at {top:g} m (z + r = {x[i, 2] + r[i]:.4g} m)"
+    return None
+
+
+def imported_packing(scen: Scenario, spec: Any, container_top: float) -> Any:
+    """The ``soil.packing.Packing`` of the scenario's ``soil.packing_file`` with the materials of
+    its deposition spec ``spec`` (``crashdem.run.packing_spec``): the upper soil for every
+    grain, the lower layer's below ``physics.soil_layering.depth`` from the bed's top when the
+    layering is on. ``container_top`` [m]: the height of the container's walls."""
+    from soil import packing as pk
+
+    path = Path(scen["soil.packing_file"])
+    if (scen["physics.boundary_proximity.enabled"]
+            and scen["physics.boundary_proximity.floor_depth"] is not None):
+        raise ScenarioError(
+            f"physics.boundary_proximity.floor_depth={scen['physics.boundary_proximity.floor_depth']!r}"
+            f": a floor depth re-deposits the bed, and {FIELD} gives the bed with its own floor "
+            "at z = 0; allowed: null with an imported bed")
+    x, r = read_bed(path)
+    bad = _outside(scen, x, r, container_top)
+    if bad is not None:
+        i, how = bad
+        raise ScenarioError(f"{FIELD}={str(path)!r}: grain {i} of {len(r)} (centre "
+                            f"{np.round(x[i], 5).tolist()} m, radius {r[i]:.5g} m) is {how}; "
+                            f"a grain may overlap a wall by {WALL_OVERLAP:g} of its radius. "
+                            "Remove grains that escaped the container, or set the container "
+                            "to the bed's")
+    top = float(np.max(x[:, 2] + r))
+    material = np.zeros(len(r), dtype=np.int32)
+    if scen["physics.soil_layering.enabled"]:
+        material[x[:, 2] < top - float(scen["physics.soil_layering.depth"])] = 1
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    info = {"source": "imported", "packing_file": str(path), "packing_file_sha256": digest,
+            "grains": int(len(r)), "bed_top_z": top}
+    return pk.Packing(x=x, radius=r, material=material, materials=tuple(spec.materials),
+                      spec={"imported": str(path), "sha256": digest}, seed=0,
+                      porosity=math.nan, porosity_region=None, info=info)
