@@ -56,18 +56,20 @@ def test_the_tank_filter_accepts_what_the_import_accepts():
 def test_crashdem_on_yade_bed_follows_yade(tmp_path):
     """Code-to-code check on one bed: crashdem's impact on Yade's deposited grains (null 21,
     blocked rotations) against Yade's own. Oracle: Yade's run on the same grains with the same
-    materials and speed; what differs is the contact implementation, the facet tank and the
-    integrator (docs/drop_campaign.md, same-packing comparison: crashdem 3-4 % deeper).
-    Measured (2026-12-02): penetration +7.9 %, the 10-20 ms peak window +0.4 %. Bounds: the
-    peak window within 3 % and the penetration within 10 % (a bed imported wrongly -- shifted,
-    scaled, another grain order -- moves the peak by more), and the import must matter: on
-    crashdem's own bed at the same grain size the penetration differs by more than 3 %
-    (measured 8.4 %)."""
+    materials and speed, in the 2 m tank and in a 6 m one, where no wall is within reach and
+    what is left is the grain and impactor contacts and the integrators. Measured
+    (2026-12-02): the 10-20 ms peak window +0.6 %; penetration +8.0 % in the 2 m tank, +4.1 %
+    with the tank as Yade's facets present it, +2.6 % in the 6 m tank; crashdem's own bed
+    -8.4 %. Bounds: the peak window within 3 % and the 6 m tank within 4 % (a bed imported
+    wrongly -- shifted, scaled, reordered -- or a contact law that differs moves both by more),
+    the facet-equivalent wall nearer Yade than crashdem's own wall, and the import must matter
+    (crashdem's own bed at the same grain size more than 3 % away)."""
     from validation.diagnosis_yade.same_bed import same_bed
 
-    row = same_bed(None, 21, tmp_path)
+    row = same_bed(None, 21, tmp_path, tank_diameter=6.0)
     y, c = row["yade"], row["crashdem_on_yade_bed"]
     assert c["a_10_20ms"] == pytest.approx(y["a_10_20ms"], rel=0.03), row
-    assert abs(row["dynamics_penetration"]) < 0.10, row
+    assert abs(row["dynamics_wide"]) < 0.04, row
+    assert abs(row["dynamics_in_yade_wall"]) < abs(row["dynamics_penetration"]), row
     assert row["imported_grains"] >= 0.98 * row["yade_grains"]
     assert abs(row["deposition_penetration"]) > 0.03, row

@@ -169,15 +169,22 @@ def _fingerprint() -> str:
     return hashlib.sha256(SCRIPT.read_bytes() + HISTORY.read_bytes()).hexdigest()[:12]
 
 
-def run_yade(cfg: dict[str, Any], cache: Path) -> tuple[np.ndarray, dict[str, Any]]:
-    """Run (or load) one Yade impact; returns the history (t, z, vz, Fz) and the run facts."""
+def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = None
+             ) -> tuple[np.ndarray, dict[str, Any]]:
+    """Run (or load) one Yade impact; returns the history (t, z, vz, Fz) and the run facts.
+    ``packing_npz``: impact on this bed (an earlier run's ``info["packing_npz"]``) instead of
+    the one deposited for ``cfg`` (e.g. the same grains in another tank)."""
     store = cache / "diagnosis_yade"
     store.mkdir(parents=True, exist_ok=True)
-    pk_key = hashlib.sha256(json.dumps({k: cfg[k] for k in (
-        "seed", "radius", "radius_spread", "bed_depth", "tank_radius", "young", "density",
-        "friction_angle", "stiffness_ratio", "deposit_unbalanced")}, sort_keys=True).encode()
-        + _fingerprint().encode()).hexdigest()[:16]
-    cfg = dict(cfg, packing_npz=str(store / f"packing-{pk_key}.npz"))
+    if packing_npz is None:
+        pk_key = hashlib.sha256(json.dumps({k: cfg[k] for k in (
+            "seed", "radius", "radius_spread", "bed_depth", "tank_radius", "young", "density",
+            "friction_angle", "stiffness_ratio", "deposit_unbalanced")}, sort_keys=True).encode()
+            + _fingerprint().encode()).hexdigest()[:16]
+        packing_npz = store / f"packing-{pk_key}.npz"
+    elif not Path(packing_npz).is_file():
+        raise FileNotFoundError(f"run_yade: packing_npz={str(packing_npz)!r} does not exist")
+    cfg = dict(cfg, packing_npz=str(packing_npz))
     key = hashlib.sha256((json.dumps(cfg, sort_keys=True) + _fingerprint()).encode()).hexdigest()[:20]
     out = store / key
     if not Path(str(out) + ".npy").exists():
@@ -317,5 +324,5 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
                      "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw,
                      "realised": realised, "packing_npz": info["packing_npz"],
-                     "tank_radius": cfg["tank_radius"]},
+                     "tank_radius": cfg["tank_radius"], "cfg": dict(cfg)},
                     recal)
