@@ -88,25 +88,41 @@ def _delimiter(p: Path) -> str | None:
     return None
 
 
+def _through_floor(x: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Mask of the grains through the floor z = 0 by more than ``WALL_OVERLAP`` of their radius."""
+    return x[:, 2] - r < -WALL_OVERLAP * r
+
+
+def _through_cylinder(x: np.ndarray, r: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of the grains through a cylinder wall of ``radius`` on the z axis by more than
+    ``WALL_OVERLAP`` of their radius."""
+    return np.hypot(x[:, 0], x[:, 1]) + r - radius > WALL_OVERLAP * r
+
+
+def inside_cylinder(x: np.ndarray, r: np.ndarray, radius: float) -> np.ndarray:
+    """Mask of the grains an imported bed may hold in a cylinder tank of ``radius`` on the z
+    axis: above the floor and inside the wall, each within ``WALL_OVERLAP`` of their radius."""
+    return ~(_through_floor(x, r) | _through_cylinder(x, r, radius))
+
+
 def _outside(scen: Scenario, x: np.ndarray, r: np.ndarray, top: float) -> tuple[int, str] | None:
     """The first grain of the bed outside the scenario's container (index, how), or None."""
-    tol = WALL_OVERLAP * r
-    below = x[:, 2] - r < -tol
+    below = _through_floor(x, r)
     if below.any():
         i = int(np.argmax(below))
         return i, f"below the floor (z - r = {x[i, 2] - r[i]:.4g} m, allowed >= 0)"
     if scen["container.shape"] == "cylinder":
         R = 0.5 * scen["container.diameter"]
-        rad = np.hypot(x[:, 0], x[:, 1]) + r
-        out = rad - R > tol
+        out = _through_cylinder(x, r, R)
         if out.any():
             i = int(np.argmax(out))
-            return i, (f"outside the tank wall (distance from the axis + r = {rad[i]:.4g} m, "
+            rad = float(np.hypot(x[i, 0], x[i, 1]) + r[i])
+            return i, (f"outside the tank wall (distance from the axis + r = {rad:.4g} m, "
                        f"allowed <= container.diameter/2 = {R:g} m)")
     else:
         half = np.array([0.5 * scen["container.length"], 0.5 * scen["container.width"]])
         reach = np.abs(x[:, :2]) + r[:, None]
-        out = np.any(reach - half > tol[:, None], axis=1)
+        out = np.any(reach - half > WALL_OVERLAP * r[:, None], axis=1)
         if out.any():
             i = int(np.argmax(out))
             return i, (f"outside the box (|x|, |y| + r = {reach[i].tolist()} m, allowed <= "

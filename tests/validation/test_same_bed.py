@@ -12,9 +12,9 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from crashdem.beds import WALL_OVERLAP  # noqa: E402
+from crashdem.beds import WALL_OVERLAP, inside_cylinder  # noqa: E402
 from validation.diagnosis_yade.cases import yade_available  # noqa: E402
-from validation.diagnosis_yade.same_bed import WINDOWS, impact_metrics, inside_tank  # noqa: E402
+from validation.diagnosis_yade.same_bed import WINDOWS, impact_metrics  # noqa: E402
 
 
 def test_metrics_of_a_constant_deceleration():
@@ -49,7 +49,7 @@ def test_the_tank_filter_accepts_what_the_import_accepts():
                   [0.9 + 0.5 * WALL_OVERLAP * 0.1, 0.0, 0.5],   # pressing the wall: kept
                   [0.9 + 2.0 * WALL_OVERLAP * 0.1, 0.0, 0.5],   # through it: dropped
                   [0.0, 0.0, 0.1 - 2.0 * WALL_OVERLAP * 0.1]])  # through the floor: dropped
-    assert inside_tank(x, r, 1.0).tolist() == [True, True, False, False]
+    assert inside_cylinder(x, r, 1.0).tolist() == [True, True, False, False]
 
 
 @pytest.mark.skipif(not yade_available(), reason="yade is not installed")

@@ -42,7 +42,7 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from crashdem.beds import WALL_OVERLAP  # noqa: E402
+from crashdem.beds import inside_cylinder  # noqa: E402
 
 #: windows [s after first contact] of the mean specific force
 WINDOWS = ((0.0, 0.01), (0.01, 0.02), (0.02, 0.04), (0.04, 0.06), (0.06, 0.08), (0.08, 0.10),
@@ -51,14 +51,6 @@ WINDOWS = ((0.0, 0.01), (0.01, 0.02), (0.02, 0.04), (0.04, 0.06), (0.06, 0.08), 
 YADE_TANK_SEGMENTS = 64
 #: the cases of the default run: (effect or None, seed)
 DEFAULT_CASES = ((None, 21), (None, 22), ("particle_rotation", 21))
-
-
-def inside_tank(x: np.ndarray, r: np.ndarray, tank_radius: float) -> np.ndarray:
-    """Mask of the grains inside a cylinder tank of ``tank_radius`` on the z axis, above the
-    floor z = 0, within ``crashdem.beds.WALL_OVERLAP`` of their radius (what the import
-    accepts)."""
-    tol = WALL_OVERLAP * r
-    return (np.hypot(x[:, 0], x[:, 1]) + r - tank_radius <= tol) & (x[:, 2] - r >= -tol)
 
 
 def impact_metrics(t: np.ndarray, v: np.ndarray, a: np.ndarray) -> dict[str, float]:
@@ -123,7 +115,7 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
     yade = _yade_metrics(hist, info["mass"])
     bed = np.load(meta["packing_npz"])
     x, r = bed["x"], bed["radius"]
-    keep = inside_tank(x, r, meta["tank_radius"])
+    keep = inside_cylinder(x, r, meta["tank_radius"])  # what the import accepts
     name = f"{effect or 'null'}_{seed}"
     d = work / name
     d.mkdir(parents=True, exist_ok=True)
