@@ -134,6 +134,18 @@ def _outside(scen: Scenario, x: np.ndarray, r: np.ndarray, top: float) -> tuple[
     return None
 
 
+def check_scenario(scen: Scenario) -> None:
+    """Refuse what an imported bed cannot take, before the file is read: a floor depth
+    (``physics.boundary_proximity.floor_depth`` re-deposits the bed; the file's bed has its own
+    floor at z = 0). ``ScenarioError`` naming the field."""
+    if (scen["physics.boundary_proximity.enabled"]
+            and scen["physics.boundary_proximity.floor_depth"] is not None):
+        raise ScenarioError(
+            f"physics.boundary_proximity.floor_depth={scen['physics.boundary_proximity.floor_depth']!r}"
+            f": a floor depth re-deposits the bed, and {FIELD} gives the bed with its own floor "
+            "at z = 0; allowed: null with an imported bed")
+
+
 def imported_packing(scen: Scenario, spec: Any, container_top: float) -> Any:
     """The ``soil.packing.Packing`` of the scenario's ``soil.packing_file`` with the materials of
     its deposition spec ``spec`` (``crashdem.run.packing_spec``): the upper soil for every
@@ -142,12 +154,7 @@ def imported_packing(scen: Scenario, spec: Any, container_top: float) -> Any:
     from soil import packing as pk
 
     path = Path(scen["soil.packing_file"])
-    if (scen["physics.boundary_proximity.enabled"]
-            and scen["physics.boundary_proximity.floor_depth"] is not None):
-        raise ScenarioError(
-            f"physics.boundary_proximity.floor_depth={scen['physics.boundary_proximity.floor_depth']!r}"
-            f": a floor depth re-deposits the bed, and {FIELD} gives the bed with its own floor "
-            "at z = 0; allowed: null with an imported bed")
+    check_scenario(scen)
     x, r = read_bed(path)
     bad = _outside(scen, x, r, container_top)
     if bad is not None:

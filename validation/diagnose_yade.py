@@ -25,6 +25,7 @@ under ``~/.cache/crashdem`` (``$CRASHDEM_CACHE``).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import functools
 import json
 import sys
@@ -72,10 +73,50 @@ def _errors(fitted: dict, values: dict) -> dict[str, float]:
     return {k: (fitted[k] - v) / abs(v) for k, v in values.items() if k in fitted and v != 0}
 
 
+#: where ``--on-yade-bed`` writes the Yade beds it imports (the library path)
+ON_BED_DIR = "yade_beds"
+
+
+def _drawn_values(case) -> dict[str, float]:
+    """The comparable truth as drawn: on the case's own bed an interface depth means the same in
+    both codes (below the bed's highest grain top: ``yade_truth.py`` and
+    ``crashdem.beds.imported_packing`` alike), so ``cases.realised_depths`` does not apply."""
+    from validation.diagnosis_yade.cases import COMPARED
+
+    return {COMPARED[k]: float(v) for k, v in case.drawn.items() if k in COMPARED}
+
+
+def _check_on_bed(effect: str | None) -> None:
+    if effect == "boundary_proximity":
+        raise ValueError("on_yade_bed: a floor case's Yade bed is the shallow bed itself, so "
+                         "importing it puts the concealed floor into the model; diagnose the "
+                         "floor cases on crashdem's own beds")
+
+
+@contextlib.contextmanager
+def _on_bed(meta: dict):
+    """crashdem's baseline numerics (``generator_dem.BASELINE_NUMERICS``) on the Yade case's
+    own bed (``soil.packing_file``, ``cases.write_yade_bed``) while the block runs."""
+    from crashdem.diagnosis import generator_dem
+    from validation.diagnosis_yade.cases import write_yade_bed
+
+    digest = Path(meta["packing_npz"]).stem
+    path, _, _ = write_yade_bed(meta, generator_dem.cache_dir() / ON_BED_DIR / f"{digest}.npz")
+    saved = dict(generator_dem.BASELINE_NUMERICS)
+    generator_dem.BASELINE_NUMERICS.update({"soil.radius": float(meta["radius"]),
+                                            "soil.packing_file": str(path)})
+    try:
+        yield path
+    finally:
+        generator_dem.BASELINE_NUMERICS.clear()
+        generator_dem.BASELINE_NUMERICS.update(saved)
+
+
 def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
                   filter_class: bool = False, raw: bool = False,
                   fixed: dict[str, float] | None = None,
-                  recalibration: dict[str, float] | None = None) -> dict:
+                  recalibration: dict[str, float] | None = None,
+                  on_yade_bed: bool = False) -> dict:
     """Make (or load) one Yade case and diagnose it; returns the table row.
 
     ``filter_class``: the null physics of ``seed`` acquired at a class drawn from
@@ -84,17 +125,30 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
     pre-trigger; ``cases.yade_case(..., raw=True)``). ``fixed``: drawn parameters of
     ``effect`` pinned to values (``cases.yade_case(..., fixed=...)``). ``recalibration``: the
     Yade bed's soil values other than the scenario's (``cases.yade_case(...,
-    recalibration=...)``; with ``effect=None`` the right answer is no missing physics)."""
+    recalibration=...)``; with ``effect=None`` the right answer is no missing physics).
+    ``on_yade_bed``: crashdem's baseline and every run on the case's own Yade bed
+    (``soil.packing_file``), as ``crashdem diagnose`` searches an imported bed (``cli._one_bed``:
+    no replicate packings, one bed per level, no numerics check); not for floor cases."""
     from crashdem.diagnosis import screen_then_confirm
-    from crashdem.diagnosis.generator_dem import (DemFullSimulator, dem_baseline_raw,
-                                                  impact_speed, replicates)
+    from crashdem.diagnosis.generator_dem import (DemFullSimulator, dem_baseline,
+                                                  dem_baseline_raw, impact_speed, replicates)
 
+    if on_yade_bed:
+        _check_on_bed(effect)
     t0 = time.perf_counter()
     effect, case, values = make_case(effect, seed, filter_class, raw, fixed, recalibration)
     t1 = time.perf_counter()
-    rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(), top_k=top_k,
-                              impact_speed=impact_speed(), baseline_raw=dem_baseline_raw(),
-                              replicates=replicates())
+    if on_yade_bed:
+        values = values if filter_class else _drawn_values(case)
+        with _on_bed(case.meta):
+            rep = screen_then_confirm(dem_baseline(), case.recording, DemFullSimulator(),
+                                      top_k=top_k, impact_speed=impact_speed(),
+                                      baseline_raw=dem_baseline_raw(), replicates=[],
+                                      level_beds=1, numerics=())
+    else:
+        rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(),
+                                  top_k=top_k, impact_speed=impact_speed(),
+                                  baseline_raw=dem_baseline_raw(), replicates=replicates())
     t2 = time.perf_counter()
     top = rep.hypotheses[0]
     claimed = rep.missing_physics
@@ -127,20 +181,26 @@ TEST_SETUP = {"container.diameter": BASE_OVERRIDES["container.diameter"],
 def cli_case(effect: str | None, seed: int, out: str | Path, scenario: str | Path,
              extra: list[str] | tuple[str, ...] = (), filter_class: bool = False,
              raw: bool = False, fixed: dict[str, float] | None = None,
-             recalibration: dict[str, float] | None = None) -> dict:
+             recalibration: dict[str, float] | None = None, on_yade_bed: bool = False) -> dict:
     """Make (or load) one Yade case, write its lab channels as CSV and diagnose it through the
     command line (``python -m crashdem diagnose``, the judged path: its own baseline run,
     search, replicates and confirmations, on Dask workers) with ``--scenario scenario`` and
     ``TEST_SETUP``; returns the table row (``diagnose_case``'s keys where the report has them,
     plus ``how``, ``beds_deposited``, ``out``). ``filter_class``, ``raw``, ``fixed``,
     ``recalibration``: as ``diagnose_case``. ``extra``: more arguments of the command (e.g.
-    ``--packing-cache DIR``, ``--full-search coarse``)."""
+    ``--packing-cache DIR``, ``--full-search coarse``). ``on_yade_bed``: the scenario on the
+    case's own Yade bed (``--set soil.packing_file=DIR/<case>/yade_bed.npz``)."""
     import subprocess
 
     from crashdem.recordings import write_recording
+    from validation.diagnosis_yade.cases import write_yade_bed
 
+    if on_yade_bed:
+        _check_on_bed(effect)
     t0 = time.perf_counter()
     effect, case, values = make_case(effect, seed, filter_class, raw, fixed, recalibration)
+    if on_yade_bed and not filter_class:
+        values = _drawn_values(case)
     name = f"{'filter_class' if filter_class else effect or 'null'}_{seed}" + "".join(
         f"_{k.rsplit('.', 1)[1]}={v:g}" for k, v in sorted(case.recalibration.items()))
     d = Path(out) / name
@@ -151,6 +211,9 @@ def cli_case(effect: str | None, seed: int, out: str | Path, scenario: str | Pat
            "--recording", str(rec), "--out", str(d / "out")]
     for k, v in TEST_SETUP.items():
         cmd += ["--set", f"{k}={str(v).lower() if isinstance(v, bool) else v}"]
+    if on_yade_bed:
+        bed, _, _ = write_yade_bed(case.meta, d / "yade_bed.npz")
+        cmd += ["--set", f"soil.packing_file={bed}"]
     cmd += list(extra)
     proc = subprocess.run(cmd, capture_output=True, text=True)
     t2 = time.perf_counter()
@@ -221,6 +284,11 @@ def main(argv=None) -> int:
     ap.add_argument("--cli-args", default="", metavar="ARGS",
                     help="more arguments of each 'crashdem diagnose' with --cli, one string, "
                          "e.g. \"--packing-cache /tmp/beds --full-search coarse\"")
+    ap.add_argument("--on-yade-bed", action="store_true",
+                    help="crashdem's baseline and runs on each case's own Yade bed "
+                         "(soil.packing_file; the deposition shared, what is left is the "
+                         "dynamics); the floor cases, whose bed is the shallow bed itself, are "
+                         "left out")
     args = ap.parse_args(argv)
     if args.cli_args and args.cli is None:
         ap.error("--cli-args needs --cli DIR")
@@ -260,6 +328,15 @@ def main(argv=None) -> int:
             ap.error("--top-k: not with --cli (the command's --full-confirm decides)")
     else:
         diagnose = functools.partial(diagnose_case, top_k=args.top_k)
+    if args.on_yade_bed:
+        diagnose = functools.partial(diagnose, on_yade_bed=True)
+        if "boundary_proximity" in args.effects:
+            print("--on-yade-bed: the floor cases are left out (their Yade bed is the shallow "
+                  "bed itself)")
+            args.effects = [e for e in args.effects if e != "boundary_proximity"]
+        if args.recalibrate:
+            ap.error("--recalibrate: not with --on-yade-bed (the bed carries the recalibrated "
+                     "deposition)")
     t0 = time.perf_counter()
     rows = []
     for eff in args.effects:

@@ -338,6 +338,9 @@ def _diagnose_command(args: argparse.Namespace) -> int:
     # the beds already in each directory runs deposit in (the count of report.json)
     own = (pcache if pcache is not None else Path(args.out) / "baseline" / "packings").resolve()
     beds_before = {own: _cached_beds(own)}
+    if (not planar and scen.get("soil.packing_file") and getattr(args, "full_confirm", None) != 0
+            and _search_on_itself(scen, getattr(args, "full_search", None) or "auto")[0]):
+        _one_bed(scen, None, args)  # options that would repeat the one bed, before any run
     baseline, source = _baseline(scen, cmap, base_params, settings,
                                  mode=getattr(args, "baseline", None) or "run",
                                  out_dir=Path(args.out), packing_cache=pcache)
@@ -370,14 +373,19 @@ def _diagnose_command(args: argparse.Namespace) -> int:
             scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out),
             packing_cache=pcache)
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
+        numerics = _numerics_scales(getattr(args, "numerics_check", None))
+        level_beds = _level_beds(getattr(args, "level_beds", None))
+        one_bed = _one_bed(scen, search_sim, args) if searched else None
+        if one_bed is not None:
+            reps, numerics, level_beds = [], (), 1
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
-                                  numerics=_numerics_scales(getattr(args, "numerics_check", None)),
-                                  level_beds=_level_beds(getattr(args, "level_beds", None)),
-                                  **cat_kw)
+                                  numerics=numerics, level_beds=level_beds, **cat_kw)
         rep.simulations["full_search"] = search_how
+        if one_bed is not None:
+            rep.simulations["imported_bed"] = one_bed
         if hasattr(full, "describe"):
             rep.simulations["confirmation"] = full.describe()
     else:
@@ -418,6 +426,35 @@ def _replicates(scen, n: int | None, searched: bool) -> list[dict[str, Any]]:
     from crashdem.diagnosis import replicate_overrides
 
     return replicate_overrides(scen.get("scenario.seed"), n)
+
+
+def _one_bed(scen, search_sim, args) -> dict[str, Any] | None:
+    """The search on an imported bed itself (``soil.packing_file``, no coarse tier): the
+    recording's bed is the model's, one realisation, so there are no replicate packings (another
+    ``scenario.seed`` repeats the bed), one bed per level and no numerics check (a grain-radius
+    factor does not change an imported bed). Returns what the report records (the bed and the
+    reasons), None when the search deposits its beds. An explicit ``--replicates``,
+    ``--level-beds`` or ``--numerics-check`` that would repeat the bed is refused."""
+    bed = imported_bed(scen)
+    if bed is None or search_sim is not None:
+        return None
+    field = "soil.packing_file"
+    for opt, val, none in (("--replicates", getattr(args, "replicates", None), (None, 0)),
+                           ("--level-beds", getattr(args, "level_beds", None), (None, 1))):
+        if val not in none:
+            raise ValueError(f"{opt}={val!r}: the scenario's bed is imported ({field}="
+                             f"{bed['packing_file']!r}), one realisation that another packing "
+                             f"seed repeats; allowed: {none[1]} (or leave it out)")
+    nc = getattr(args, "numerics_check", None)
+    if nc is not None and nc.strip().lower() not in ("off", "none", ""):
+        raise ValueError(f"--numerics-check={nc!r}: the scenario's bed is imported ({field}), "
+                         "whose grain radii a radius factor does not change; allowed: off (or "
+                         "leave it out)")
+    return {**bed, "replicates": 0, "level_beds": 1, "numerics_check": "off",
+            "why": ("the recording's bed is the model's (imported, one realisation): no "
+                    "replicate packings or realisation floor, one bed per search level, no "
+                    "grain-radius numerics check; what is left between the two is the "
+                    "dynamics, which the noise and model-error floor weigh")}
 
 
 def _level_beds(n: int | None) -> int | None:
@@ -483,14 +520,29 @@ def _bed_grains(spec) -> float:
     return BED_SOLID_FRACTION * spec.container.area * depth / spec.radius.mean_volume
 
 
+def imported_bed(scen) -> dict[str, Any] | None:
+    """The scenario's imported bed (``soil.packing_file``, ``crashdem.beds``): its path, grain
+    count and smallest radius [m]; None when the scenario deposits its bed."""
+    path = scen.get("soil.packing_file")
+    if not path:
+        return None
+    from crashdem.beds import read_bed
+
+    _, r = read_bed(Path(path))
+    return {"packing_file": str(path), "grains": int(len(r)), "r_min": float(r.min())}
+
+
 def bed_grains(scen) -> float:
     """Estimated number of grains in the scenario's bed: ``BED_SOLID_FRACTION`` x the bed's
     volume (container cross-section x soil depth, or the floor depth of a switched-on
     ``boundary_proximity``) / the mean grain volume of its radius distribution. Deterministic
     (no deposition); it does not undercount: the 2 m and 6 m tanks at 0.075 m deposit 79 % and
-    88 % of it."""
+    88 % of it. An imported bed (``soil.packing_file``) counts its file's grains."""
     from crashdem.run import packing_spec
 
+    bed = imported_bed(scen)
+    if bed is not None:
+        return float(bed["grains"])
     return _bed_grains(packing_spec(scen))
 
 
@@ -499,7 +551,8 @@ def search_load(scen) -> float:
     (``_LOAD_REFERENCE``): ``bed_grains`` x the reference step / the scenario's step. The step
     is ``solver.dt``, else ``solver.safety`` x the P-wave step
     (``soil.timestep.pwave_time_step``) of the smallest grain in the stiffest soil material (a
-    run's critical step is that or the contact-stiffness step, which scales the same way)."""
+    run's critical step is that or the contact-stiffness step, which scales the same way); an
+    imported bed counts its file's grains and smallest radius."""
     from soil.timestep import pwave_time_step
 
     from crashdem.run import packing_spec
@@ -508,13 +561,15 @@ def search_load(scen) -> float:
     ref_dt = ref["safety"] * pwave_time_step(np.array([ref["radius"]]), np.array([ref["young"]]),
                                              np.array([ref["density"]]))
     spec = packing_spec(scen)
+    bed = imported_bed(scen)
     dt = scen.get("solver.dt")
     if dt is None:
         mats = spec.materials
+        r_min = spec.radius.r_min if bed is None else bed["r_min"]
         dt = scen.get("solver.safety") * pwave_time_step(
-            np.full(len(mats), spec.radius.r_min), np.array([m.young for m in mats]),
+            np.full(len(mats), r_min), np.array([m.young for m in mats]),
             np.array([m.density for m in mats]))
-    return _bed_grains(spec) * ref_dt / dt
+    return (_bed_grains(spec) if bed is None else float(bed["grains"])) * ref_dt / dt
 
 
 def search_tier(scen) -> dict[str, Any]:
@@ -522,7 +577,8 @@ def search_tier(scen) -> dict[str, Any]:
     or larger than the scenario itself -- the grain radius at least the scenario's, the radius
     spread and the container (a cylinder's diameter; a box's length and width, each) at most
     the scenario's. A tier wider than the scenario's container would move its walls away from
-    the impact, and one with finer grains would cost more than the scenario."""
+    the impact, and one with finer grains would cost more than the scenario. A scenario on an
+    imported bed (``soil.packing_file``) is searched on deposited coarse beds."""
     box = scen.get("container.shape") == "box"
     out: dict[str, Any] = {
         "soil.radius": max(SEARCH_COARSE["soil.radius"], float(scen.get("soil.radius"))),
@@ -530,7 +586,30 @@ def search_tier(scen) -> dict[str, Any]:
                                   float(scen.get("soil.radius_spread")))}
     for k in (("container.length", "container.width") if box else ("container.diameter",)):
         out[k] = min(SEARCH_COARSE[k], float(scen.get(k)))
+    if scen.get("soil.packing_file"):
+        # an imported bed is the scenario's grains: the coarse tier deposits its own beds
+        out["soil.packing_file"] = ""
     return out
+
+
+def _search_on_itself(scen, mode: str) -> tuple[bool, float | None]:
+    """Whether the full-model search of ``--full-search mode`` runs on the scenario itself,
+    and the load the ``auto`` gate measured for it (None when none was needed): ``full`` yes,
+    ``coarse`` no; ``auto`` yes for a scenario no finer than the coarse tier (its radius spread
+    alone does not count) that deposits its bed, else when ``search_load`` is at most
+    ``AUTO_FULL_LOAD`` (an imported bed always goes through the gate: its grains are the
+    file's, not the scenario's radius)."""
+    if mode == "full":
+        return True, None
+    if mode != "auto":
+        return False, None
+    coarse = search_tier(scen)
+    finer = any(not math.isclose(v, float(scen.get(k)), rel_tol=1e-3)
+                for k, v in coarse.items() if k not in ("soil.radius_spread", "soil.packing_file"))
+    if not finer and not scen.get("soil.packing_file"):
+        return True, None
+    load = search_load(scen)
+    return load <= AUTO_FULL_LOAD, load
 
 
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path,
@@ -554,34 +633,45 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     if planar or mode == "off":
         return {}, None, "off" if mode == "off" else "not available for the glider"
     searched = {}
+    unsearched = []
     for k, fs in DROP.full_search.items():
         if scen.get(f"physics.{k}.enabled") or (k == "particle_rotation"
                                                 and scen.get("soil.rotation") == "free"):
             continue
         # levels the scenario cannot take are dropped (a floor above its layering interface is
-        # taken: it ends the column there, distributed.scenario_overrides)
+        # taken: it ends the column there, distributed.scenario_overrides; an imported bed takes
+        # no floor depth, crashdem.beds.check_scenario)
         ok = tuple(x for x in fs.values if _runnable(scen, fs.overrides(x)))
         if len(ok) >= 2:
             searched[k] = replace(fs, values=ok) if ok != fs.values else fs
+        else:
+            unsearched.append(k)
     coarse = search_tier(scen)
-    # finer grains or a larger container than the tier (its radius spread alone does not count)
-    finer = any(not math.isclose(v, float(scen.get(k)), rel_tol=1e-3)
-                for k, v in coarse.items() if k != "soil.radius_spread")
-    if mode == "full" or (mode == "auto" and not finer):
-        return searched, None, f"{len(searched)} effects on the scenario itself"
-    load = search_load(scen) if mode == "auto" else math.inf
-    if load <= AUTO_FULL_LOAD:
-        return searched, None, (f"{len(searched)} effects on the scenario itself (a small bed: "
-                                f"about {bed_grains(scen):,.0f} grains, load {load:,.0f} <= "
-                                f"{AUTO_FULL_LOAD:,})")
+    bed = imported_bed(scen)
+    note = ""
+    if unsearched:
+        why = ("the imported bed (soil.packing_file) has its own floor" if bed is not None
+               else "none of its levels runs on this scenario")
+        note = f"; not searched: {', '.join(unsearched)} ({why})"
+    itself, load = _search_on_itself(scen, mode)
+    if itself and load is None:
+        return searched, None, f"{len(searched)} effects on the scenario itself{note}"
+    if itself:
+        what = (f"the imported bed: {bed_grains(scen):,.0f} grains" if bed is not None
+                else f"a small bed: about {bed_grains(scen):,.0f} grains")
+        return searched, None, (f"{len(searched)} effects on the scenario itself ({what}, load "
+                                f"{load:,.0f} <= {AUTO_FULL_LOAD:,}){note}")
     search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs")
     if packing_cache is not None:
         from crashdem.run import share_packings
 
         share_packings(out / "search_runs", packing_cache)
-    return searched, search, (f"{len(searched)} effects at the coarse resolution "
-                              f"({', '.join(f'{k}={v:g}' for k, v in coarse.items())}), the "
-                              f"leading ones confirmed at the scenario's")
+    tier = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
+                     for k, v in coarse.items())
+    return searched, search, (f"{len(searched)} effects at the coarse resolution ({tier}), the "
+                              f"leading ones confirmed at the scenario's"
+                              + (" (the coarse tier on deposited beds: the imported bed is "
+                                 "the scenario's only)" if bed is not None else "") + note)
 
 
 def _local_runner(scen, cmap: dict[str, str], out_dir: Path):
@@ -607,7 +697,12 @@ def _runnable(scen, overrides: dict[str, Any]) -> bool:
     from crashdem.scenario import ScenarioError
 
     try:
-        packing_spec(scen.with_overrides(scenario_overrides(scen, overrides)))
+        s = scen.with_overrides(scenario_overrides(scen, overrides))
+        packing_spec(s)
+        if s.get("soil.packing_file"):
+            from crashdem.beds import check_scenario
+
+            check_scenario(s)
     except (ScenarioError, ValueError):
         return False
     return True

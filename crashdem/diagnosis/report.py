@@ -261,6 +261,11 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
               + (f"; search simulations: {sims['search_simulations']}"
                  if sims.get("search_simulations") else "")
               + f"; wall time {sims['wall_time_s']:.1f} s.", ""]
+    if sims.get("full_search"):
+        lines += [f"Full-model search: {sims['full_search']}.", ""]
+    ib = sims.get("imported_bed")
+    if isinstance(ib, dict):
+        lines += [f"Imported bed {ib['packing_file']} ({ib['grains']:,} grains): {ib['why']}.", ""]
     pc = sims.get("packing_cache")
     if isinstance(pc, dict):
         lines += [f"Deposited beds: {pc['beds_deposited']} new"

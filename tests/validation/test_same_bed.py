@@ -73,3 +73,64 @@ def test_crashdem_on_yade_bed_follows_yade(tmp_path):
     assert abs(row["dynamics_in_yade_wall"]) < abs(row["dynamics_penetration"]), row
     assert row["imported_grains"] >= 0.98 * row["yade_grains"]
     assert abs(row["deposition_penetration"]) > 0.03, row
+
+
+def _synthetic_rows(n_cases, n_own, delta, s_yade, s_own, seed):
+    """Rows as ``deposition_row`` returns them, for beds whose penetrations are drawn: Yade's
+    bed m (1 + e_y), crashdem's own beds m (1 + delta) (1 + e_k), e_y ~ N(0, s_yade),
+    e_k ~ N(0, s_own), m varying between the cases (grain sizes)."""
+    rng = np.random.default_rng(seed)
+    rows = []
+    for _ in range(n_cases):
+        m = rng.uniform(0.5, 0.8)
+        on = m * (1.0 + rng.normal(0.0, s_yade))
+        own = m * (1.0 + delta) * (1.0 + rng.normal(0.0, s_own, n_own))
+        each = [{"penetration_m": float(p), "a_0_10ms": 250.0, "a_10_20ms": 400.0} for p in own]
+        rows.append({"own_seeds": list(range(1, n_own + 1)),
+                     "crashdem_on_yade_bed": {"penetration_m": float(on), "a_0_10ms": 300.0,
+                                              "a_10_20ms": 380.0},
+                     "crashdem_own_bed": {"penetration_m": float(own.mean()), "a_0_10ms": 250.0,
+                                          "a_10_20ms": 400.0},
+                     "crashdem_own_beds": each,
+                     "deposition_penetration": float(own.mean() / on - 1.0)})
+    return rows
+
+
+def test_deposition_summary_recovers_the_drawn_shift_and_scatters():
+    """Oracle: beds drawn with a known deposition shift (-6 %), a scatter of one Yade bed (5 %)
+    and of one crashdem bed (8 %); over 400 cases of 6 own beds the summary recovers the shift
+    within 3 standard errors, each scatter within 15 %, and the window means exactly. A
+    summary that forgets the own beds' share (sqrt(1/N)) or pools the scatter by the mean
+    instead of each case's own mean fails the Yade scatter."""
+    from validation.diagnosis_yade.same_bed import deposition_summary
+
+    rows = _synthetic_rows(400, 6, -0.06, 0.05, 0.08, seed=3)
+    s = deposition_summary(rows)
+    assert s["beds"] == 400 and s["own_beds_per_bed"] == 6
+    assert abs(s["deposition_mean"] - (-0.06)) < 3 * s["deposition_stderr"] + 0.003, s
+    assert s["deposition_stderr"] == pytest.approx(s["deposition_sd"] / 20.0)
+    assert s["own_bed_scatter"] == pytest.approx(0.08, rel=0.15), s
+    assert s["yade_bed_scatter"] == pytest.approx(0.05, rel=0.15), s
+    assert s["a_0_10ms_own_over_yade_bed"] == pytest.approx(250.0 / 300.0 - 1.0)
+    assert s["a_10_20ms_own_over_yade_bed"] == pytest.approx(400.0 / 380.0 - 1.0)
+    # without a Yade-bed scatter the implied one is small against the own beds'
+    s0 = deposition_summary(_synthetic_rows(400, 6, 0.0, 0.0, 0.08, seed=4))
+    assert s0["yade_bed_scatter"] < 0.02, s0
+    assert abs(s0["deposition_mean"]) < 3 * s0["deposition_stderr"] + 0.003, s0
+
+
+def test_deposition_mode_refuses_what_it_cannot_compare():
+    from validation.diagnosis_yade.same_bed import deposition_row, main
+
+    with pytest.raises(SystemExit):
+        main(["--deposition", "--own-seeds", "1", "--cases", "null:21"])
+    with pytest.raises(SystemExit):
+        main(["--deposition", "--own-seeds", "3", "--cases", "boundary_proximity:11"])
+    with pytest.raises(SystemExit):
+        main(["--cases", "cohesion:11"])  # its impact is not the bed's as deposited
+    with pytest.raises(SystemExit):
+        main(["--own-seeds", "0"])
+    with pytest.raises(SystemExit):
+        main(["--own-set", "soil.deposition_friction_deg"])
+    with pytest.raises(ValueError, match="boundary_proximity"):
+        deposition_row("boundary_proximity", 11, Path("."), (1, 2))

@@ -129,6 +129,23 @@ def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,
     return out
 
 
+def write_yade_bed(meta: Mapping[str, Any], path: str | Path) -> tuple[Path, int, int]:
+    """A Yade case's bed (``YadeCase.meta``: ``packing_npz``, ``tank_radius``) written as
+    ``soil.packing_file`` reads it (``.npz`` with ``x``, ``radius``; floor at z = 0, tank on
+    the z axis), without the grains that escaped Yade's 64-facet tank further than the import
+    accepts (``crashdem.beds.inside_cylinder``: 7 of 449 on null 21). Returns the file and the
+    grain counts before and after."""
+    from crashdem.beds import inside_cylinder
+
+    bed = np.load(meta["packing_npz"])
+    x, r = bed["x"], bed["radius"]
+    keep = inside_cylinder(x, r, float(meta["tank_radius"]))
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    np.savez(path, x=x[keep], radius=r[keep])
+    return path, int(len(r)), int(keep.sum())
+
+
 def yade_available() -> bool:
     """True when the ``yade`` executable is on the PATH."""
     return shutil.which("yade") is not None

@@ -35,6 +35,7 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 
@@ -42,7 +43,6 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from crashdem.beds import inside_cylinder  # noqa: E402
 
 #: windows [s after first contact] of the mean specific force
 WINDOWS = ((0.0, 0.01), (0.01, 0.02), (0.02, 0.04), (0.04, 0.06), (0.06, 0.08), (0.08, 0.10),
@@ -102,9 +102,33 @@ def _yade_metrics(hist: np.ndarray, mass: float) -> dict[str, float]:
     return impact_metrics(hist[:, 0], hist[:, 2], hist[:, 3] / mass)
 
 
-def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | None = None
-             ) -> dict:
-    """The runs of one Yade case (module docstring); returns the table row."""
+def _yade_bed(meta: dict, d: Path) -> tuple[Path, int, int]:
+    """The case's Yade bed as the import accepts it (``d/yade_bed.npz``), with the grain
+    counts before and after (``cases.write_yade_bed``)."""
+    from validation.diagnosis_yade.cases import write_yade_bed
+
+    return write_yade_bed(meta, d / "yade_bed.npz")
+
+
+def _own_beds(common: dict, name: str, d: Path, own_seeds: Sequence[int],
+              own_overrides: dict | None) -> tuple[dict[str, float], list[dict[str, float]], int]:
+    """crashdem's impact on its own beds (``scenario.seed`` in ``own_seeds``, with
+    ``own_overrides``, e.g. another deposition friction): the metrics averaged over the beds,
+    each bed's, and the first bed's grain count."""
+    runs = []
+    for k in own_seeds:
+        m, info = _crashdem({**common, **(own_overrides or {}), "scenario.seed": int(k),
+                             "scenario.name": f"{name}_own_bed_{k}"}, d)
+        runs.append((m, int(info["particles"])))
+    mean = {key: float(np.mean([m[key] for m, _ in runs])) for key in runs[0][0]}
+    return mean, [m for m, _ in runs], runs[0][1]
+
+
+def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | None = None,
+             own_seeds: Sequence[int] = (1,), own_overrides: dict | None = None) -> dict:
+    """The runs of one Yade case (module docstring); returns the table row. ``own_seeds``:
+    the packing seeds of crashdem's own beds (their metrics averaged; ``crashdem_own_beds``
+    holds each), ``own_overrides``: scenario values of those beds only."""
     from crashdem.diagnosis.generator_dem import cache_dir
     from validation.diagnosis_yade.cases import run_yade, yade_case
 
@@ -113,30 +137,25 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
     meta = case.meta
     hist, info = run_yade(meta["cfg"], cache_dir())  # the case's run, cached by yade_case
     yade = _yade_metrics(hist, info["mass"])
-    bed = np.load(meta["packing_npz"])
-    x, r = bed["x"], bed["radius"]
-    keep = inside_cylinder(x, r, meta["tank_radius"])  # what the import accepts
     name = f"{effect or 'null'}_{seed}"
     d = work / name
-    d.mkdir(parents=True, exist_ok=True)
-    np.savez(d / "yade_bed.npz", x=x[keep], radius=r[keep])
+    bed_file, n_yade, n_kept = _yade_bed(meta, d)
     rot = ({"soil.rotation": "free", "soil.rolling_coefficient": 0.0}
            if effect == "particle_rotation" else {})
     common = {"soil.radius": meta["radius"], **rot}
-    imported = {**common, "soil.packing_file": str(d / "yade_bed.npz")}
+    imported = {**common, "soil.packing_file": str(bed_file)}
     on_yade, _ = _crashdem({**imported, "scenario.name": f"{name}_on_yade_bed"}, d)
     young = float(meta["cfg"]["young"])
     facets, _ = _crashdem({**imported, "scenario.name": f"{name}_in_yade_wall",
                            "container.diameter": 2.0 * meta["tank_radius"]
                            * math.cos(math.pi / YADE_TANK_SEGMENTS),
                            "container.wall_young": 4.0 / 3.0 * young}, d)
-    own, info_o = _crashdem({**common, "scenario.name": f"{name}_own_bed",
-                             "scenario.seed": 1}, d)
+    own, each, n_own = _own_beds(common, name, d, own_seeds, own_overrides)
     row = {"truth": effect, "seed": seed, "radius_m": meta["radius"],
-           "yade_grains": int(len(r)), "imported_grains": int(keep.sum()),
-           "crashdem_own_grains": int(info_o["particles"]),
+           "yade_grains": n_yade, "imported_grains": n_kept, "crashdem_own_grains": n_own,
+           "own_seeds": [int(k) for k in own_seeds], "own_overrides": dict(own_overrides or {}),
            "yade": yade, "crashdem_on_yade_bed": on_yade, "crashdem_in_yade_wall": facets,
-           "crashdem_own_bed": own,
+           "crashdem_own_bed": own, "crashdem_own_beds": each,
            "dynamics_penetration": on_yade["penetration_m"] / yade["penetration_m"] - 1.0,
            "dynamics_in_yade_wall": facets["penetration_m"] / yade["penetration_m"] - 1.0,
            "deposition_penetration": own["penetration_m"] / on_yade["penetration_m"] - 1.0}
@@ -151,6 +170,92 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
                                 / row["yade_wide"]["penetration_m"] - 1.0)
     row["wall_s"] = time.perf_counter() - t0
     return row
+
+
+def deposition_row(effect: str | None, seed: int, work: Path, own_seeds: Sequence[int],
+                   own_overrides: dict | None = None) -> dict:
+    """The deposition alone, on the bed of any Yade case: crashdem's impact (the baseline's
+    physics, blocked rotations, whatever the case's effect) on Yade's grains against its
+    impact on its own beds of the case's grain size (``own_seeds``, ``own_overrides``).
+    Every 2 m bed a Yade case deposits is the same deposition (``yade_truth.py`` deposits
+    with the baseline's material and sets the effect's afterwards), so effect cases add beds;
+    a floor case's bed is shallower and is refused."""
+    if effect == "boundary_proximity":
+        raise ValueError("deposition_row: effect='boundary_proximity' has a shallower bed than "
+                         "crashdem's own beds of the baseline; use a case with the 2 m bed")
+    from validation.diagnosis_yade.cases import yade_case
+
+    t0 = time.perf_counter()
+    meta = yade_case(seed, effect, raw=True).meta
+    name = f"bed_{effect or 'null'}_{seed}"
+    d = work / name
+    bed_file, n_yade, n_kept = _yade_bed(meta, d)
+    common = {"soil.radius": meta["radius"]}
+    on_yade, _ = _crashdem({**common, "soil.packing_file": str(bed_file),
+                            "scenario.name": f"{name}_on_yade_bed"}, d)
+    own, each, n_own = _own_beds(common, name, d, own_seeds, own_overrides)
+    pen = np.array([m["penetration_m"] for m in each])
+    return {"truth": effect, "seed": seed, "radius_m": meta["radius"],
+            "yade_grains": n_yade, "imported_grains": n_kept, "crashdem_own_grains": n_own,
+            "own_seeds": [int(k) for k in own_seeds], "own_overrides": dict(own_overrides or {}),
+            "crashdem_on_yade_bed": on_yade, "crashdem_own_bed": own, "crashdem_own_beds": each,
+            "own_penetration_sd": float(pen.std(ddof=1)) if len(pen) > 1 else float("nan"),
+            "deposition_penetration": own["penetration_m"] / on_yade["penetration_m"] - 1.0,
+            "wall_s": time.perf_counter() - t0}
+
+
+def deposition_summary(rows: Sequence[dict]) -> dict[str, float]:
+    """The deposition's share over several Yade beds (``deposition_row`` rows, or
+    ``same_bed`` rows): the mean of crashdem's own beds over Yade's bed in crashdem's impact,
+    as a relative penetration, with its standard error over the beds; the scatter of one of
+    crashdem's own beds about their mean (relative, pooled over the cases: the realisation
+    scatter the diagnosis's replicate packings measure) and that of the ratio between the
+    cases. If Yade's beds scatter as crashdem's do, the latter is the former times
+    sqrt(1 + 1/N) for N own beds per case; ``yade_bed_scatter`` is what the ratio's scatter
+    implies for one Yade bed (relative), with crashdem's N-bed mean's share taken out."""
+    ratio = np.array([r["deposition_penetration"] for r in rows])
+    n_own = [len(r["own_seeds"]) for r in rows]
+    within = [np.array([m["penetration_m"] for m in r["crashdem_own_beds"]]) for r in rows]
+    rel = [w / w.mean() - 1.0 for w in within if len(w) > 1]
+    s_own = (float(np.sqrt(sum(float((x ** 2).sum()) for x in rel)
+                           / sum(len(x) - 1 for x in rel))) if rel else float("nan"))
+    n = len(ratio)
+    sd = float(ratio.std(ddof=1)) if n > 1 else float("nan")
+    nbar = float(np.mean(n_own))
+    early_y = np.array([r["crashdem_on_yade_bed"]["a_0_10ms"] for r in rows])
+    early_o = np.array([r["crashdem_own_bed"]["a_0_10ms"] for r in rows])
+    peak_y = np.array([r["crashdem_on_yade_bed"]["a_10_20ms"] for r in rows])
+    peak_o = np.array([r["crashdem_own_bed"]["a_10_20ms"] for r in rows])
+    return {"beds": n, "own_beds_per_bed": nbar,
+            "deposition_mean": float(ratio.mean()),
+            "deposition_stderr": sd / math.sqrt(n) if n > 1 else float("nan"),
+            "deposition_sd": sd, "own_bed_scatter": s_own,
+            "yade_bed_scatter": (float(math.sqrt(max(sd ** 2 - s_own ** 2 / nbar, 0.0)))
+                                 if n > 1 and rel else float("nan")),
+            "a_0_10ms_own_over_yade_bed": float(early_o.mean() / early_y.mean() - 1.0),
+            "a_10_20ms_own_over_yade_bed": float(peak_o.mean() / peak_y.mean() - 1.0)}
+
+
+def _deposition_table(rows: Sequence[dict], summary: dict[str, float]) -> str:
+    lines = [f"{'case':>24s} {'radius':>8s} {'on Yade bed':>12s} {'own mean':>9s} "
+             f"{'own sd':>7s} {'own/Yade':>9s} {'a 0-10 ms Yade/own':>20s}"]
+    for r in rows:
+        lines.append(f"{(r['truth'] or 'null') + ':' + str(r['seed']):>24s} "
+                     f"{r['radius_m']:8.4f} {r['crashdem_on_yade_bed']['penetration_m']:12.3f} "
+                     f"{r['crashdem_own_bed']['penetration_m']:9.3f} "
+                     f"{r.get('own_penetration_sd', float('nan')):7.3f} "
+                     f"{r['deposition_penetration']:+9.1%} "
+                     f"{r['crashdem_on_yade_bed']['a_0_10ms']:9.0f} /"
+                     f"{r['crashdem_own_bed']['a_0_10ms']:6.0f}")
+    s = summary
+    lines.append(f"deposition over {s['beds']} Yade beds x {s['own_beds_per_bed']:g} own beds: "
+                 f"{s['deposition_mean']:+.1%} +- {s['deposition_stderr']:.1%} (standard "
+                 f"error); between beds {s['deposition_sd']:.1%}; one own bed about its mean "
+                 f"{s['own_bed_scatter']:.1%}, one Yade bed (implied) "
+                 f"{s['yade_bed_scatter']:.1%}; first 10 ms "
+                 f"{s['a_0_10ms_own_over_yade_bed']:+.1%}, 10-20 ms "
+                 f"{s['a_10_20ms_own_over_yade_bed']:+.1%} (own over Yade's bed)")
+    return "\n".join(lines)
 
 
 def _table(rows: list[dict]) -> str:
@@ -185,23 +290,75 @@ def main(argv=None) -> int:
     ap.add_argument("--tank-diameter", type=float, default=None, metavar="D",
                     help="also run both codes on the same grains in a tank of diameter D [m] "
                          "(e.g. 6: the wall out of reach); one more Yade run per case")
+    ap.add_argument("--own-seeds", type=int, default=1, metavar="N",
+                    help="crashdem's own beds per case: packing seeds 1..N, their metrics "
+                         "averaged (default 1)")
+    ap.add_argument("--own-set", action="append", default=[], metavar="KEY=VALUE",
+                    help="a scenario value of crashdem's own beds only, e.g. "
+                         "soil.deposition_friction_deg=35 (repeatable)")
+    ap.add_argument("--deposition", action="store_true",
+                    help="the deposition alone, on the bed of each case (any effect: its "
+                         "bed is deposited as a null's): crashdem on Yade's grains against its "
+                         "own beds, and the summary over the cases; no further Yade run")
     a = ap.parse_args(argv)
     cases = DEFAULT_CASES
     if a.cases:
+        from validation.diagnosis_yade.cases import YADE_EFFECT_DRAWS
+
+        # a floor case's bed is shallower than crashdem's own beds of the baseline
+        allowed = (("null", *(e for e in YADE_EFFECT_DRAWS if e != "boundary_proximity"))
+                   if a.deposition else ("null", "particle_rotation"))
         cases = []
         for c in a.cases:
             eff, _, seed = c.partition(":")
-            if not seed.isdigit() or eff not in ("null", "particle_rotation"):
-                ap.error(f"--cases {c!r}: must be null:SEED or particle_rotation:SEED (the "
-                         "effects whose impact runs on the bed as deposited)")
+            if not seed.isdigit() or eff not in allowed:
+                ap.error(f"--cases {c!r}: must be EFFECT:SEED with EFFECT in {allowed}"
+                         + ("" if a.deposition else " (the effects whose impact runs on the "
+                            "bed as deposited; --deposition takes the bed of any case)"))
             cases.append((None if eff == "null" else eff, int(seed)))
     if a.tank_diameter is not None and not 0.3 <= a.tank_diameter <= 20.0:
         ap.error(f"--tank-diameter {a.tank_diameter!r}: must be in [0.3, 20] m "
                  "(container.diameter's range)")
+    if not 1 <= a.own_seeds <= 50:
+        ap.error(f"--own-seeds {a.own_seeds!r}: must be in [1, 50]")
+    if a.deposition and a.own_seeds < 2:
+        ap.error("--deposition needs --own-seeds of at least 2 (the scatter of crashdem's own "
+                 "beds)")
+    own_overrides = {}
+    for kv in a.own_set:
+        key, eq, val = kv.partition("=")
+        if not eq or not key:
+            ap.error(f"--own-set {kv!r}: must be KEY=VALUE")
+        try:
+            own_overrides[key] = json.loads(val)
+        except json.JSONDecodeError:
+            own_overrides[key] = val
+    seeds = tuple(range(1, a.own_seeds + 1))
     work = Path(a.work) if a.work else Path(tempfile.mkdtemp(prefix="same_bed_"))
-    rows = [same_bed(e, s, work, a.tank_diameter) for e, s in cases]
+    if a.deposition:
+        from validation.diagnosis_yade.cases import yade_case
+
+        rows, seen = [], {}
+        for e, s in cases:
+            # cases of one seed and grain size share a bed: each bed counts once
+            bed = yade_case(s, e, raw=True).meta["packing_npz"]
+            if bed in seen:
+                print(f"{e or 'null'}:{s}: the bed of {seen[bed]}, counted once")
+                continue
+            seen[bed] = f"{e or 'null'}:{s}"
+            rows.append(deposition_row(e, s, work, seeds, own_overrides))
+        summary = deposition_summary(rows)
+        print(_deposition_table(rows, summary))
+        print(json.dumps({"cases": rows, "summary": summary}))
+        return 0
+    rows = [same_bed(e, s, work, a.tank_diameter, seeds, own_overrides) for e, s in cases]
     print(_table(rows))
-    print(json.dumps({"cases": rows}))
+    if len(rows) > 1 and a.own_seeds > 1:
+        summary = deposition_summary(rows)
+        print(_deposition_table(rows, summary))
+        print(json.dumps({"cases": rows, "summary": summary}))
+    else:
+        print(json.dumps({"cases": rows}))
     return 0
 
 
