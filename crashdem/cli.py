@@ -141,17 +141,19 @@ def build_parser() -> argparse.ArgumentParser:
                    help="run the baseline with N other packing seeds (scenario.seed + 1 ... + N) "
                         "on the simulator the search runs on; an effect must fit the recording "
                         "better than every one of them (the realisation floor; default 4 with "
-                        "the full-model search, 0 = none)")
+                        "the full-model search, 0 = none; none when the search runs on an "
+                        "imported bed, soil.packing_file, the recording's one bed)")
     d.add_argument("--level-beds", type=int, default=None, metavar="N",
                    help="run each search level of an effect that deposits its own bed (floor, "
                         "interface depth) on N beds: the baseline's packing and the first N - 1 "
                         "replicates', each taken against the baseline run of its bed, and "
                         "average the changes (default 5 when the search runs on the scenario "
-                        "itself, 1 on the coarse search tier; at most 1 + --replicates)")
+                        "itself, 1 on the coarse search tier or on an imported bed; at most "
+                        "1 + --replicates)")
     d.add_argument("--numerics-check", default=None, metavar="F[,F...]|off",
                    help="rerun a named soil effect's search levels with the grain radius times "
                         "each factor and widen its uncertainty to how far the value moves "
-                        "(default 0.9,1.1; off = none)")
+                        "(default 0.9,1.1; off = none, and on an imported bed)")
     d.add_argument("--packing-cache", default=None, metavar="DIR|off",
                    help="deposit the beds of the baseline, search and confirmation runs in this "
                         "cache, shared by later diagnoses (default: $CRASHDEM_CACHE/packings or "
