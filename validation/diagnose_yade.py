@@ -78,12 +78,13 @@ ON_BED_DIR = "yade_beds"
 
 
 def _drawn_values(case) -> dict[str, float]:
-    """The comparable truth as drawn: on the case's own bed an interface depth means the same in
-    both codes (below the bed's highest grain top: ``yade_truth.py`` and
-    ``crashdem.beds.imported_packing`` alike), so ``cases.realised_depths`` does not apply."""
-    from validation.diagnosis_yade.cases import COMPARED
+    """The comparable truth as drawn (``cases.drawn_values``): on the case's own bed an
+    interface depth means the same in both codes (below the bed's highest grain top:
+    ``yade_truth.py`` and ``crashdem.beds.imported_packing`` alike), so
+    ``cases.realised_depths`` does not apply."""
+    from validation.diagnosis_yade.cases import drawn_values
 
-    return {COMPARED[k]: float(v) for k, v in case.drawn.items() if k in COMPARED}
+    return drawn_values(case.drawn)
 
 
 def _check_on_bed(effect: str | None) -> None:

@@ -19,6 +19,7 @@ impactor [m/s^2]; ``velocity_z`` [m/s]) by name, or explicitly with ``NAME:accel
 from __future__ import annotations
 
 import argparse
+import functools
 import math
 from dataclasses import replace
 from pathlib import Path
@@ -435,10 +436,11 @@ def _one_bed(scen, search_sim, args) -> dict[str, Any] | None:
     factor does not change an imported bed). Returns what the report records (the bed and the
     reasons), None when the search deposits its beds. An explicit ``--replicates``,
     ``--level-beds`` or ``--numerics-check`` that would repeat the bed is refused."""
+    from crashdem.beds import FIELD as field
+
     bed = imported_bed(scen)
     if bed is None or search_sim is not None:
         return None
-    field = "soil.packing_file"
     for opt, val, none in (("--replicates", getattr(args, "replicates", None), (None, 0)),
                            ("--level-beds", getattr(args, "level_beds", None), (None, 1))):
         if val not in none:
@@ -446,7 +448,7 @@ def _one_bed(scen, search_sim, args) -> dict[str, Any] | None:
                              f"{bed['packing_file']!r}), one realisation that another packing "
                              f"seed repeats; allowed: {none[1]} (or leave it out)")
     nc = getattr(args, "numerics_check", None)
-    if nc is not None and nc.strip().lower() not in ("off", "none", ""):
+    if nc is not None and _numerics_scales(nc):
         raise ValueError(f"--numerics-check={nc!r}: the scenario's bed is imported ({field}), "
                          "whose grain radii a radius factor does not change; allowed: off (or "
                          "leave it out)")
@@ -522,14 +524,27 @@ def _bed_grains(spec) -> float:
 
 def imported_bed(scen) -> dict[str, Any] | None:
     """The scenario's imported bed (``soil.packing_file``, ``crashdem.beds``): its path, grain
-    count and smallest radius [m]; None when the scenario deposits its bed."""
+    count and smallest radius [m]; None when the scenario deposits its bed. The file is read
+    once per version of it (``_bed_facts``), however often a diagnosis asks."""
     path = scen.get("soil.packing_file")
     if not path:
         return None
+    try:
+        st = Path(path).stat()
+    except OSError:
+        st = None  # read_bed names the missing file
+    grains, r_min = _bed_facts(str(path), st and st.st_mtime_ns, st and st.st_size)
+    return {"packing_file": str(path), "grains": grains, "r_min": r_min}
+
+
+@functools.lru_cache(maxsize=8)
+def _bed_facts(path: str, mtime_ns: int | None, size: int | None) -> tuple[int, float]:
+    """Grain count and smallest radius of the bed file ``path`` (its modification time and
+    size in the key, so an edited file is read again)."""
     from crashdem.beds import read_bed
 
     _, r = read_bed(Path(path))
-    return {"packing_file": str(path), "grains": int(len(r)), "r_min": float(r.min())}
+    return int(len(r)), float(r.min())
 
 
 def bed_grains(scen) -> float:

@@ -129,6 +129,11 @@ def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,
     return out
 
 
+def drawn_values(drawn: Mapping[str, Any]) -> dict[str, float]:
+    """The comparable truth of a case's draws in the ROM's names (``COMPARED``), as drawn."""
+    return {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
+
+
 def write_yade_bed(meta: Mapping[str, Any], path: str | Path) -> tuple[Path, int, int]:
     """A Yade case's bed (``YadeCase.meta``: ``packing_npz``, ``tank_radius``) written as
     ``soil.packing_file`` reads it (``.npz`` with ``x``, ``radius``; floor at z = 0, tank on
@@ -334,7 +339,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
                                      f"{radius:g} m, dt {info['dt']:.3g} s)")
         if not declare_cfc:
             rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
-    values = {COMPARED[k]: float(v) for k, v in drawn.items() if k in COMPARED}
+    values = drawn_values(drawn)
     realised = realised_depths(drawn, info["packing_npz"], info["surface_z"])
     values.update(realised)
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),

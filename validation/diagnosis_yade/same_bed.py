@@ -102,14 +102,6 @@ def _yade_metrics(hist: np.ndarray, mass: float) -> dict[str, float]:
     return impact_metrics(hist[:, 0], hist[:, 2], hist[:, 3] / mass)
 
 
-def _yade_bed(meta: dict, d: Path) -> tuple[Path, int, int]:
-    """The case's Yade bed as the import accepts it (``d/yade_bed.npz``), with the grain
-    counts before and after (``cases.write_yade_bed``)."""
-    from validation.diagnosis_yade.cases import write_yade_bed
-
-    return write_yade_bed(meta, d / "yade_bed.npz")
-
-
 def _own_beds(common: dict, name: str, d: Path, own_seeds: Sequence[int],
               own_overrides: dict | None) -> tuple[dict[str, float], list[dict[str, float]], int]:
     """crashdem's impact on its own beds (``scenario.seed`` in ``own_seeds``, with
@@ -130,7 +122,7 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
     the packing seeds of crashdem's own beds (their metrics averaged; ``crashdem_own_beds``
     holds each), ``own_overrides``: scenario values of those beds only."""
     from crashdem.diagnosis.generator_dem import cache_dir
-    from validation.diagnosis_yade.cases import run_yade, yade_case
+    from validation.diagnosis_yade.cases import run_yade, write_yade_bed, yade_case
 
     t0 = time.perf_counter()
     case = yade_case(seed, effect, raw=True)
@@ -139,7 +131,7 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
     yade = _yade_metrics(hist, info["mass"])
     name = f"{effect or 'null'}_{seed}"
     d = work / name
-    bed_file, n_yade, n_kept = _yade_bed(meta, d)
+    bed_file, n_yade, n_kept = write_yade_bed(meta, d / "yade_bed.npz")
     rot = ({"soil.rotation": "free", "soil.rolling_coefficient": 0.0}
            if effect == "particle_rotation" else {})
     common = {"soil.radius": meta["radius"], **rot}
@@ -173,23 +165,25 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
 
 
 def deposition_row(effect: str | None, seed: int, work: Path, own_seeds: Sequence[int],
-                   own_overrides: dict | None = None) -> dict:
+                   own_overrides: dict | None = None, meta: dict | None = None) -> dict:
     """The deposition alone, on the bed of any Yade case: crashdem's impact (the baseline's
     physics, blocked rotations, whatever the case's effect) on Yade's grains against its
     impact on its own beds of the case's grain size (``own_seeds``, ``own_overrides``).
     Every 2 m bed a Yade case deposits is the same deposition (``yade_truth.py`` deposits
     with the baseline's material and sets the effect's afterwards), so effect cases add beds;
-    a floor case's bed is shallower and is refused."""
+    a floor case's bed is shallower and is refused. ``meta``: the case's ``YadeCase.meta``
+    when the caller has it already (else ``cases.yade_case`` makes it)."""
     if effect == "boundary_proximity":
         raise ValueError("deposition_row: effect='boundary_proximity' has a shallower bed than "
                          "crashdem's own beds of the baseline; use a case with the 2 m bed")
-    from validation.diagnosis_yade.cases import yade_case
+    from validation.diagnosis_yade.cases import write_yade_bed, yade_case
 
     t0 = time.perf_counter()
-    meta = yade_case(seed, effect, raw=True).meta
+    if meta is None:
+        meta = yade_case(seed, effect, raw=True).meta
     name = f"bed_{effect or 'null'}_{seed}"
     d = work / name
-    bed_file, n_yade, n_kept = _yade_bed(meta, d)
+    bed_file, n_yade, n_kept = write_yade_bed(meta, d / "yade_bed.npz")
     common = {"soil.radius": meta["radius"]}
     on_yade, _ = _crashdem({**common, "soil.packing_file": str(bed_file),
                             "scenario.name": f"{name}_on_yade_bed"}, d)
@@ -341,12 +335,13 @@ def main(argv=None) -> int:
         rows, seen = [], {}
         for e, s in cases:
             # cases of one seed and grain size share a bed: each bed counts once
-            bed = yade_case(s, e, raw=True).meta["packing_npz"]
+            meta = yade_case(s, e, raw=True).meta
+            bed = meta["packing_npz"]
             if bed in seen:
                 print(f"{e or 'null'}:{s}: the bed of {seen[bed]}, counted once")
                 continue
             seen[bed] = f"{e or 'null'}:{s}"
-            rows.append(deposition_row(e, s, work, seeds, own_overrides))
+            rows.append(deposition_row(e, s, work, seeds, own_overrides, meta=meta))
         summary = deposition_summary(rows)
         print(_deposition_table(rows, summary))
         print(json.dumps({"cases": rows, "summary": summary}))
