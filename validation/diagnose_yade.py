@@ -285,6 +285,10 @@ def main(argv=None) -> int:
     ap.add_argument("--cli-args", default="", metavar="ARGS",
                     help="more arguments of each 'crashdem diagnose' with --cli, one string, "
                          "e.g. \"--packing-cache /tmp/beds --full-search coarse\"")
+    ap.add_argument("--truth-radius", type=float, default=None, metavar="R",
+                    help="mean grain radius [m] about which the Yade truths draw theirs "
+                         "(default 0.10, the small bed's; e.g. 0.075, the campaign scenario's, "
+                         "with --cli: a recording on a finer bed than the coarse search tier's)")
     ap.add_argument("--on-yade-bed", action="store_true",
                     help="crashdem's baseline and runs on each case's own Yade bed "
                          "(soil.packing_file; the deposition shared, what is left is the "
@@ -309,6 +313,13 @@ def main(argv=None) -> int:
             check_fixed(eff, fixed)
         except ValueError as err:
             ap.error(f"--fix (effect {eff}): {err}")
+    if args.truth_radius is not None:
+        from validation.diagnosis_yade.cases import use_truth_radius
+
+        try:
+            use_truth_radius(args.truth_radius)
+        except ValueError as err:
+            ap.error(f"--truth-radius: {err}")
     if args.scenario is not None:
         from crashdem.diagnosis.generator_dem import use_scenario
 

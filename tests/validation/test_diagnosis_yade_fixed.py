@@ -251,3 +251,26 @@ def test_realised_depths_are_measured_on_the_yade_bed(tmp_path):
     assert got == {"interface_depth": pytest.approx(surface - (top - 0.3))}
     assert got["interface_depth"] < 0.3  # the highest grain top lies above the surface
     assert cases.realised_depths({"cohesion": 2e5}, f, top) == {}
+
+
+def test_the_truth_radius_scales_only_the_grains(monkeypatch, tmp_path):
+    """``use_truth_radius`` (``--truth-radius``): a case's grain radius is drawn about the given
+    radius instead of 0.10 m, by the same factor of the seed; nothing else changes. Out of
+    [0.03, 0.2] m it is refused by name, and the script refuses it before any Yade run."""
+    from validation.diagnose_yade import main
+
+    base = _cfg(monkeypatch, tmp_path, 21, None)
+    monkeypatch.setattr(cases, "TRUTH_RADIUS", cases.TRUTH_RADIUS)  # restored after the test
+    cases.use_truth_radius(0.075)
+    fine = _cfg(monkeypatch, tmp_path, 21, None)
+    assert fine["radius"] == pytest.approx(base["radius"] * 0.75, abs=1e-5)
+    assert {k: v for k, v in fine.items() if k != "radius"} == \
+        {k: v for k, v in base.items() if k != "radius"}
+    for bad in (0.01, 0.5, float("nan")):
+        with pytest.raises(ValueError, match=re.escape("truth_radius=") + ".*"
+                           + re.escape("[0.03, 0.2] m")):
+            cases.use_truth_radius(bad)
+    monkeypatch.setattr(cases, "run_yade", lambda cfg, cache: pytest.fail("ran Yade"))
+    with pytest.raises(SystemExit) as ex:
+        main(["--truth-radius", "0.5"])
+    assert ex.value.code == 2

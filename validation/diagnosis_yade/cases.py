@@ -23,8 +23,8 @@ sensor_dynamics        the acceleration seen through ``MountDynamics`` 40-90 Hz,
 =====================  ==================================================================
 
 Numerics unlike the baseline (crashdem, 0.10 m grains, packing seed 1, safety 0.3): Yade's
-deposition with seed ``2000 + seed``, mean radius 0.10 x (1 +- 0.10-0.15), ``dt_factor``
-0.2-0.4. The drop-mass history is acquired like a lab channel
+deposition with seed ``2000 + seed``, mean radius 0.10 x (1 +- 0.10-0.15) (``TRUTH_RADIUS``),
+``dt_factor`` 0.2-0.4. The drop-mass history is acquired like a lab channel
 (``generator.acquire_samples``: integrating 12.5 kHz acquisition, 0.5 g / 0.05 m/s noise, 80 ms
 pre-trigger, +-2 ms trigger offset, CFC 60). The baseline is crashdem's small-resolution drop
 (``generator_dem.dem_baseline``).
@@ -34,9 +34,11 @@ the Yade script's sources.
 """
 from __future__ import annotations
 
+import fcntl
 import hashlib
 import json
 import math
+import os
 import shutil
 import subprocess
 from dataclasses import dataclass, field
@@ -82,6 +84,13 @@ COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
 #: surface (``bed_surface``): the 0.45 m sphere's footprint and a grain ring, clear of the wall
 SURFACE_REGION_RADIUS = 0.7
 RADIUS_CHANGE = (0.10, 0.15)
+#: mean grain radius [m] about which a case draws its own (``RADIUS_CHANGE``): 0.10 m, the
+#: small bed's; ``use_truth_radius`` (``diagnose_yade.py --truth-radius``) sets another, e.g.
+#: the campaign scenario's 0.075 m for recordings on a finer bed than the coarse search tier's
+TRUTH_RADIUS = 0.10
+#: the radii ``use_truth_radius`` accepts [m]: at least 0.03 m (about 80,000 grains in the 2 m
+#: tank), at most 0.2 m (four grains across the 0.45 m sphere's radius)
+TRUTH_RADIUS_LIMITS = (0.03, 0.2)
 DT_FACTOR = (0.2, 0.4)
 
 
@@ -212,13 +221,25 @@ def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = 
     if not Path(str(out) + ".npy").exists():
         if not yade_available():
             raise RuntimeError("yade is not installed (Debian: apt-get install yade)")
-        cfg["out"] = str(out)
-        cfg_path = store / f"{key}.cfg.json"
-        cfg_path.write_text(json.dumps(cfg))
-        proc = subprocess.run(["yade", "-n", "-j1", "-x", str(SCRIPT), str(cfg_path)],
-                              capture_output=True, text=True, cwd=str(store), timeout=3600)
-        if not Path(str(out) + ".npy").exists():
-            raise RuntimeError(f"yade failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+        # one process at a time deposits a bed and runs on it (two processes asking for the
+        # same run, or for runs on one bed that is not deposited yet, read a half-written file
+        # otherwise); the history is written under a temporary name and renamed when complete,
+        # so a killed run leaves no entry that looks finished
+        with open(f"{packing_npz}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not Path(str(out) + ".npy").exists():
+                tmp = store / f"{key}.tmp-{os.getpid()}"
+                cfg["out"] = str(tmp)
+                cfg_path = store / f"{key}.cfg.json"
+                cfg_path.write_text(json.dumps(cfg))
+                proc = subprocess.run(["yade", "-n", "-j1", "-x", str(SCRIPT), str(cfg_path)],
+                                      capture_output=True, text=True, cwd=str(store),
+                                      timeout=3600)
+                if not (Path(str(tmp) + ".npy").exists() and Path(str(tmp) + ".json").exists()):
+                    raise RuntimeError(f"yade failed:\n{proc.stdout[-3000:]}\n"
+                                       f"{proc.stderr[-3000:]}")
+                os.replace(str(tmp) + ".json", str(out) + ".json")
+                os.replace(str(tmp) + ".npy", str(out) + ".npy")
     info = json.loads(Path(str(out) + ".json").read_text())
     info["packing_npz"] = cfg["packing_npz"]
     return np.load(str(out) + ".npy"), info
@@ -243,6 +264,16 @@ def check_fixed(effect: str | None, fixed: Mapping[str, float] | None) -> dict[s
                              f"[{lim[2]}]")
         out[k] = float(v)
     return out
+
+
+def use_truth_radius(radius: float) -> None:
+    """Draw every later case's grain radius about ``radius`` [m] instead of 0.10 m (the seed's
+    draws are otherwise unchanged; the Yade run is keyed by its radius)."""
+    global TRUTH_RADIUS
+    lo, hi = TRUTH_RADIUS_LIMITS
+    if not (math.isfinite(float(radius)) and lo <= float(radius) <= hi):
+        raise ValueError(f"truth_radius={radius!r}: must be in [{lo:g}, {hi:g}] m")
+    TRUTH_RADIUS = float(radius)
 
 
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
@@ -288,7 +319,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         if effect == "particle_rotation":
             drawn["free_rotation"] = True
     sign = 1.0 if rng.uniform() < 0.5 else -1.0
-    radius = round(0.10 * (1.0 + sign * rng.uniform(*RADIUS_CHANGE)), 5)
+    radius = round(TRUTH_RADIUS * (1.0 + sign * rng.uniform(*RADIUS_CHANGE)), 5)
     dt_factor = round(float(rng.uniform(*DT_FACTOR)), 4)
     offset = float(rng.uniform(-TRIGGER_JITTER, TRIGGER_JITTER))
     scen = _scenario()

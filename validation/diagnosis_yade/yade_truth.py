@@ -105,7 +105,10 @@ if not os.path.exists(cfg["packing_npz"]):
         if isinstance(b.shape, Sphere):  # noqa: F821
             xs.append(tuple(b.state.pos))
             rs.append(b.shape.radius)
-    np.savez(cfg["packing_npz"], x=np.array(xs), radius=np.array(rs))
+    # written whole under another name, then renamed: a killed deposition leaves no bed
+    tmp = f"{cfg['packing_npz']}.tmp-{os.getpid()}.npz"
+    np.savez(tmp, x=np.array(xs), radius=np.array(rs))
+    os.replace(tmp, cfg["packing_npz"])
     O.reset()  # noqa: F821
 
 data = np.load(cfg["packing_npz"])
