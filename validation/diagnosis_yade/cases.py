@@ -34,7 +34,6 @@ the Yade script's sources.
 """
 from __future__ import annotations
 
-import fcntl
 import hashlib
 import json
 import math
@@ -51,6 +50,7 @@ from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
 from crashdem.diagnosis import generator_dem
 from crashdem.diagnosis.generator_dem import BASE_OVERRIDES, cache_dir, dem_baseline
 from crashdem.signal import Signal
+from soil.packing import _build_lock
 
 SCRIPT = Path(__file__).resolve().parent / "yade_truth.py"
 HISTORY = Path(__file__).resolve().parents[1] / "yade_history.py"
@@ -225,8 +225,7 @@ def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = 
         # same run, or for runs on one bed that is not deposited yet, read a half-written file
         # otherwise); the history is written under a temporary name and renamed when complete,
         # so a killed run leaves no entry that looks finished
-        with open(f"{packing_npz}.lock", "w") as lock:
-            fcntl.flock(lock, fcntl.LOCK_EX)
+        with _build_lock(Path(packing_npz)):
             if not Path(str(out) + ".npy").exists():
                 tmp = store / f"{key}.tmp-{os.getpid()}"
                 cfg["out"] = str(tmp)
