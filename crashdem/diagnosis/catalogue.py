@@ -19,7 +19,7 @@ Estrada, Taboada & Radjai 2008, PRE 78:021301) to be calibrated against DEM runs
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
@@ -332,7 +332,12 @@ class FullSearch:
     (``located``). ``deposits`` says that every level deposits a bed of its own (a floor or
     an interface depth changes the deposition): a level then differs from the baseline by its
     packing as well as by the effect, and ``screen_then_confirm`` runs it on several beds
-    (``level_beds``) paired with the replicate packings."""
+    (``level_beds``) paired with the replicate packings. ``extension`` lists further values
+    beyond the strong end (the end opposite ``fades``), outward in order: the confirmation
+    runs the next of them only while the strong end of the span run so far fits the
+    recording best among the effect's levels (``extended``), so that an effect stronger than
+    the span is followed to its optimum at the cost of a level, not named at the wrong
+    value or not at all."""
 
     parameter: str
     unit: str
@@ -342,6 +347,7 @@ class FullSearch:
     scale: str = "lin"
     fades: str = "high"
     deposits: bool = False
+    extension: tuple[float, ...] = ()
 
     def __post_init__(self) -> None:
         if len(self.values) < 2 or any(b <= a for a, b in zip(self.values, self.values[1:])):
@@ -353,6 +359,28 @@ class FullSearch:
         if self.fades not in ("high", "low"):
             raise ValueError(f"FullSearch.{self.parameter}.fades={self.fades!r}: must be 'high' "
                              f"or 'low'")
+        out = -1.0 if self.fades == "high" else 1.0  # outward beyond the strong end
+        prev = self.strong_end
+        for v in self.extension:
+            if (v - prev) * out <= 0 or (self.scale == "log" and v <= 0):
+                raise ValueError(f"FullSearch.{self.parameter}.extension={self.extension!r}: "
+                                 f"each value must lie beyond the previous one, outward from "
+                                 f"the strong end {self.strong_end:g} [{self.unit}]"
+                                 + (" and be positive" if self.scale == "log" else ""))
+            prev = v
+
+    @property
+    def strong_end(self) -> float:
+        """The level at the end of the span opposite ``fades`` (where the effect is strongest)."""
+        return self.values[0] if self.fades == "high" else self.values[-1]
+
+    def extended(self) -> "FullSearch":
+        """This search with the next ``extension`` value added to its levels (it becomes the
+        strong end) and removed from ``extension``; ValueError when none is left."""
+        if not self.extension:
+            raise ValueError(f"FullSearch.{self.parameter}.extension: no value left")
+        return replace(self, values=tuple(sorted((*self.values, self.extension[0]))),
+                       extension=self.extension[1:])
 
     def located(self, value: float) -> bool:
         """True when ``value`` lies within the levels short of the fading end, i.e. not at the
@@ -396,7 +424,7 @@ DROP_FULL_SEARCH: dict[str, FullSearch] = {
     "boundary_proximity": FullSearch(
         "floor_depth", "m", ("physics.boundary_proximity.floor_depth",),
         (0.6, 0.7, 0.8, 0.9, 1.05, 1.25), {"physics.boundary_proximity.enabled": True},
-        deposits=True),
+        deposits=True, extension=(0.5, 0.4)),
     "cohesion": FullSearch(
         "cohesion", "Pa", ("physics.cohesion.normal_strength",
                                    "physics.cohesion.shear_strength"),

@@ -26,7 +26,8 @@ from __future__ import annotations
 import math
 import time
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from types import MappingProxyType
+from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
@@ -195,10 +196,24 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     full = c.full_tier(full_simulator, tier)
     t_full = time.perf_counter() - t_full
     d = c.decide(full, tier)
-    c.record(full, tier, d, t_full)
+    checks: list[dict[str, Any]] = []
     if numerics:
-        c.numerics_check(search_simulator if tier is not None else full_simulator,
-                         tier, full, d, numerics)
+        # a named value the numerics cannot resolve is withdrawn and the decision taken again
+        # without it (each effect at most once)
+        for _ in range(len(c.searched)):
+            check = c.numerics_runs(search_simulator if tier is not None else full_simulator,
+                                    tier, full, d, numerics)
+            if check is None:
+                break
+            checks.append(check)
+            why = c.unresolved(d, check)
+            if why is None:
+                break
+            c.withdrawn = {**c.withdrawn, check["hypothesis"]: why}
+            d = c.decide(full, tier)
+    c.record(full, tier, d, t_full)
+    for check in checks:
+        c.numerics_record(check, d)
     return rep
 
 
@@ -246,6 +261,9 @@ class _Decision:
 
 class _Confirmation:
     """One confirmation of a screened report: what is run, how a run is scored, what is named."""
+
+    #: effects named, then withdrawn by the numerics check (``unresolved``), with the reason
+    withdrawn: Mapping[str, str] = MappingProxyType({})
 
     def __init__(self, rep: Report, top_k: int,
                  full_search: bool | Mapping[str, catalogue.FullSearch],
@@ -431,7 +449,12 @@ class _Confirmation:
         of it; now the two are not told apart."""
         rows = list(rows)
         out = self.faded_out(rows)
-        rows = [r for r in rows if self.located(r) and r["hypothesis"] != REPLICATE]
+        # an effect whose optimum lies clearly beyond its span, or whose named value the
+        # numerics check could not resolve, stands for nothing (the screening's claim aside)
+        gone = (set(self.beyond_span(rows, floor, out)) - {self.rep.missing_physics}
+                | set(self.withdrawn))
+        rows = [r for r in rows if self.located(r) and r["hypothesis"] != REPLICATE
+                and r["hypothesis"] not in gone]
         if out and any(_decisive(r, floor) for r in rows if r["hypothesis"] not in out):
             # a rival with a located optimum explains the recording decisively
             rows = [r for r in rows if r["hypothesis"] not in out]
@@ -463,6 +486,53 @@ class _Confirmation:
                 and (n not in inner or inner[n]["delta_bic_vs_reference"]
                      < r["delta_bic_vs_reference"])}
 
+    def beyond_span(self, rows: Iterable[Row], floor: dict[str, float],
+                    out: set[str] | None = None) -> dict[str, tuple[Row, Row | None]]:
+        """The faded-out effects among ``rows`` (``faded_out``, or ``out``) whose located runs
+        all fit the recording worse than their fading-end level by more than the realisation
+        margin (``_ambiguity_margin`` of ``floor``): the profile still rises towards the end
+        where the effect vanishes, so the recording asks for less of it than the span holds
+        and its located levels are only the flank of that -- what a packing or code-to-code
+        difference that pulls the same way also gives. Mapped to (the fading-end level, the
+        best located run or None). ``standing`` lets no run of such an effect stand for it,
+        unless the screening claimed it. Measured on Yade recordings (library path, 0.1 m
+        truth grains): at 10 m the floor recording 12 was named ``soil_layering`` at 0.4 m
+        (its end level 0.5 m led by more than the scatter); now nothing. Within the margin the
+        effect stands by its located levels as before (Yade free rotation 12 stays named)."""
+        rows = list(rows)
+        if out is None:
+            out = self.faded_out(rows)
+        if not out:
+            return {}
+        margin = _ambiguity_margin(floor)
+        lv = _best_rows(r for r in _scored_levels(rows) if r["hypothesis"] in out)
+        inner = _best_rows(r for r in rows if r["hypothesis"] in out and self.located(r)
+                           and "rss" in r and "delta_bic_vs_reference" in r)
+        res: dict[str, tuple[Row, Row | None]] = {}
+        for n in out:
+            if n not in lv:
+                continue
+            own = inner.get(n)
+            if own is None or (lv[n]["delta_bic_vs_reference"] - own["delta_bic_vs_reference"]
+                               > margin):
+                res[n] = (lv[n], own)
+        return res
+
+    def _beyond_verdict(self, name: str, end: Row, own: Row | None,
+                        floor: dict[str, float]) -> str:
+        """Why an effect whose optimum lies beyond its span (``beyond_span``) names nothing."""
+        fs = self.searched[name]
+        head = (f"its best level is at the end of the span where the effect fades "
+                f"({fs.parameter} = {end['search_value']:.4g} {fs.unit}, Delta BIC "
+                f"{end['delta_bic_vs_reference']:.1f})")
+        if own is None:
+            return head + " and no run short of that end was scored: names nothing"
+        at = (f"{own['search_value']:.4g} {fs.unit}, " if "search_value" in own else "")
+        return (head + f"; its best run short of that end ({at}Delta BIC "
+                f"{own['delta_bic_vs_reference']:.1f}) is more than "
+                f"{_ambiguity_margin(floor):.3g} below it: the optimum lies beyond the span: "
+                f"names nothing")
+
     def located(self, r: Row) -> bool:
         """A scored run that can stand for its effect: not a search run at the end of the span
         where the effect fades (``FullSearch.located``)."""
@@ -486,6 +556,34 @@ class _Confirmation:
         al = {ch: Signal(ch, base[ch].t, data[ch], base[ch].unit, base[ch].cfc)
               for ch in self.chans}
         return {**self.rated(al), "rss": _full_rss(self.rep, al)}
+
+    def extended(self, sim: Simulator, rows: list[Row],
+                 finish: Callable[[Row], Row]) -> list[Row]:
+        """Further levels beyond the strong end of each searched effect with an ``extension``
+        (``FullSearch.extended``): while the effect's best level (Delta BIC, refinements aside)
+        is the strong end of its span run so far, the next extension value is run (on its
+        beds, pooled; ``finish`` anchors and scores a new row) and becomes part of the span
+        (``searched`` is updated, so the refinement, the numerics check and the reported value
+        see it). Nothing runs when the strong end does not fit best. Measured on a Yade bed
+        0.6 m deep at 13.7 m through the command line: the floor's best level was its
+        shallowest (0.6 m) and the recording was named ``soil_layering``; with the levels
+        0.5 and 0.4 m it is named ``boundary_proximity`` at 0.4 m (-16 % from the realised
+        depth)."""
+        extra: list[Row] = []
+        for name in list(self.searched):
+            while self.searched[name].extension:
+                fs = self.searched[name]
+                top = _best_rows(r for r in _scored_levels([*rows, *extra])
+                                 if r["hypothesis"] == name).get(name)
+                tol = 1e-9 * max(abs(v) for v in fs.values)
+                if top is None or abs(float(top["search_value"]) - fs.strong_end) > tol:
+                    break
+                self.searched[name] = fs = fs.extended()
+                new = self.pooled(self.run(sim, self.level_requests(name, fs.strong_end)))
+                for r in new:
+                    r["extension"] = True
+                extra += [finish(r) for r in new]
+        return extra
 
     def refined(self, sim: Simulator, rows: list[Row]) -> list[Row]:
         """One run of the leading searched effect at the vertex of the parabola through its
@@ -526,13 +624,16 @@ class _Confirmation:
                         for r in self.pooled(raw[1:])]
         base_bic = self.bic(_full_rss(rep, rep.baseline), 0)
 
-        def qualify(r: Row) -> None:
+        def qualify(r: Row) -> Row:
             if "rss" in r:
                 k = int(r["hypothesis"] != REPLICATE)  # a level carries one parameter
                 r["delta_bic_vs_reference"] = base_bic - self.bic(r["rss"], k)
+            return r
 
         for r in rows[1:]:
             qualify(r)
+        rows += self.extended(sim, rows,
+                              lambda r: qualify(r if "beds" in r else self.anchored(r, ref)))
         extra = [r if "beds" in r else self.anchored(r, ref) for r in self.refined(sim, rows)]
         for r in extra:
             qualify(r)
@@ -550,6 +651,9 @@ class _Confirmation:
         verdicts = {n: ("promoted to a full run" if any(p is r for p in promote) else
                         "not promoted: " + _verdict(r, floor, False, None, None))
                     for n, r in best.items()}
+        for n, (end, own) in self.beyond_span(rows[1:], floor).items():
+            if n not in verdicts:
+                verdicts[n] = "not promoted: " + self._beyond_verdict(n, end, own, floor)
         return _SearchTier(rows, floor,
                            [(r["hypothesis"], dict(r["overrides"]), r["search_value"])
                             for r in promote], candidates, verdicts)
@@ -590,7 +694,7 @@ class _Confirmation:
         ref_k = 0 if ref_row is base_row else len(RECALIBRATION.parameters)
         ref_bic = self.bic(ref_row["rss"], ref_k)
 
-        def qualify(r: Row) -> None:
+        def qualify(r: Row) -> Row:
             if "rss" in r:
                 # a screened candidate's run carries the effect's parameters, a search level
                 # one (the level), the reference its recalibration when it is the recalibrated
@@ -598,10 +702,12 @@ class _Confirmation:
                 k = (1 if "search_value" in r else 0 if r["hypothesis"] == REPLICATE
                      else len(rep.catalogue.get(r["hypothesis"]).parameters))
                 r["delta_bic_vs_reference"] = ref_bic - self.bic(r["rss"], k)
+            return r
 
         for r in rows[1:]:
             qualify(r)
         if self.searched and tier is None:
+            rows += self.extended(sim, rows, qualify)
             extra = self.refined(sim, rows)
             for r in extra:
                 qualify(r)
@@ -691,7 +797,8 @@ class _Confirmation:
         rows, floor = tier.rows[1:], tier.floor
         out = self.faded_out(rows)
         found = [r for r in rows
-                 if r["hypothesis"] not in (name, REPLICATE, RECALIBRATION.name, *out)
+                 if r["hypothesis"] not in (name, REPLICATE, RECALIBRATION.name, *out,
+                                            *self.withdrawn)
                  and self.located(r) and math.isfinite(r["score"]) and _contends(r, floor)
                  and r["delta_bic_vs_reference"] > own["delta_bic_vs_reference"]]
         if not found:
@@ -733,6 +840,7 @@ class _Confirmation:
         """Why each effect run in the full model was or was not named, in one line each."""
         rows = full.rows
         every = _best_rows(r for r in rows[1:] if "rss" in r and r["hypothesis"] != REPLICATE)
+        beyond = self.beyond_span(rows[1:], full.floor)
         out: dict[str, str] = {}
         for name in dict.fromkeys(r["hypothesis"] for r in rows[1:]):
             if name in (REPLICATE, RECALIBRATION.name):
@@ -740,6 +848,10 @@ class _Confirmation:
             r = d.best_by_effect.get(name)
             if name == d.confirmed:
                 why = "named"
+            elif name in self.withdrawn:
+                why = "named, then withdrawn: " + self.withdrawn[name]
+            elif r is None and name in beyond:
+                why = self._beyond_verdict(name, *beyond[name], full.floor)
             elif d.contested is not None and name in d.ambiguous:
                 why = _contested_verdict(name, d.ambiguous, d.contested)
             elif r is not None and r is d.screened and d.unsupported:
@@ -805,6 +917,7 @@ class _Confirmation:
                          "score": None if not math.isfinite(r["score"]) else r["score"],
                          "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
                          "refined": bool(r.get("refined")), "located": self.located(r),
+                         "extension": bool(r.get("extension")),
                          **({"beds": len(r["beds"])} if "beds" in r else {})}
                         for r in lv],
                 best={n: {"value": r["search_value"], "score": r["score"],
@@ -830,24 +943,24 @@ class _Confirmation:
         rep.missing_physics = d.confirmed
         self.settle(d)
         rep.decision += "; " + self.sentence(full, tier, d)
+        for name, why in self.withdrawn.items():
+            rep.decision += f"; {name} withdrawn: {why}"
         self.rerank(full, tier, d)
 
-    def numerics_check(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
-                       d: _Decision, scales: Sequence[float]) -> None:
+    def numerics_runs(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
+                      d: _Decision, scales: Sequence[float]) -> dict[str, Any] | None:
         """How far the value of a named searched effect moves with the grain size: its search
         levels run again on ``sim`` (the simulator the search ran on) with the grain radius
         times each factor of ``scales`` (on a search tier each with its own baseline run, on
         which they are anchored as the search's levels are), and each profile's optimum
         (``_profile_optimum``) is compared with that of the levels at the simulation's own
-        grains. The largest distance is the numerics uncertainty; the reported uncertainty is
-        at least it. Nothing is decided on these runs."""
+        grains. The largest distance is the numerics uncertainty (``numerics_record`` makes the
+        reported uncertainty at least it); ``unresolved`` reads the same runs. None when nothing
+        searched is named."""
         name = d.confirmed
         if name is None or name not in self.searched or "search_value" not in d.best:
-            return
+            return None
         fs, rep = self.searched[name], self.rep
-        h = next((h for h in rep.hypotheses if h["name"] == name), None)
-        if h is None or "full_model" not in h:
-            return
         t0 = time.perf_counter()
         req: list[Request] = []
         for f in scales:
@@ -873,18 +986,73 @@ class _Confirmation:
             u = _profile_optimum(lv, fs)
             per.append({"radius_scale": float(f), "value": None if u is None else fs.value(u),
                         "runs": len(mine), "failed": sum("rss" not in r for r in mine)})
-        own = _profile_optimum([r for r in _scored_levels(tier.rows if tier is not None
-                                                          else full.rows)
-                                if r["hypothesis"] == name], fs)
+        own_lv = [r for r in _scored_levels(tier.rows if tier is not None else full.rows)
+                  if r["hypothesis"] == name]
+        own = _profile_optimum(own_lv, fs)
+        own_best = _best_rows(own_lv).get(name)
         x = float(d.best["search_value"])
         shifts = [abs(p["value"] - fs.value(own)) if fs.scale != "log" else
                   abs(fs.coord(p["value"]) - own) * x
                   for p in per if p["value"] is not None and own is not None]
         sd = max(shifts) if shifts else None
-        check = {"radius_scales": [float(f) for f in scales], "values": per,
-                 "own_value": None if own is None else fs.value(own), "uncertainty": sd,
-                 "runs": len(rows), "wall_time_s": time.perf_counter() - t0}
-        p = fs.parameter
+        return {"hypothesis": name, "radius_scales": [float(f) for f in scales], "values": per,
+                "own_value": None if own is None else fs.value(own),
+                "own_best_level": None if own_best is None else float(own_best["search_value"]),
+                "uncertainty": sd,
+                "runs": len(rows), "wall_time_s": time.perf_counter() - t0}
+
+    def unresolved(self, d: _Decision, check: Mapping[str, Any] | None) -> str | None:
+        """Why the named effect is withdrawn after its numerics check, or None: it deposits its
+        own bed (a floor or an interface depth), its best level at the simulation's own grains
+        is the last one short of the end where it fades (the edge of the located span), and at
+        every other grain-radius factor the optimum of its profile lies beyond that edge
+        (``FullSearch.located`` false). No grain size then places the value inside the span:
+        the value named is one bed's packing and grain size, not a located depth. A factor
+        whose profile located no optimum at all (failed runs) withdraws nothing, and neither
+        does a value named inside the span whose reruns drift out (that is the numerics
+        uncertainty, already reported). Measured on Yade recordings at 5 m (library path):
+        floor recording 12 was named ``soil_layering`` at 0.4 m (reruns 0.413 and 0.5 m) and
+        cohesion recording 11 a floor at 1.05 m (reruns 1.25 and 1.25 m), both wrongly; the
+        nine floors named rightly at 5-18.45 m had both reruns located, and the DEM-truth floor
+        12 (named at 0.80 m, reruns 1.056 and 1.25 m) keeps its right name."""
+        name = d.confirmed
+        if check is None or name is None or check.get("hypothesis") != name:
+            return None
+        fs = self.searched.get(name)
+        vals = [p["value"] for p in check["values"]]
+        own = check.get("own_best_level")
+        if fs is None or not fs.deposits or not vals or own is None \
+                or any(v is None for v in vals) or any(fs.located(v) for v in vals):
+            return None
+        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
+        tol = 1e-9 * max(abs(v) for v in fs.values)
+        if (own < edge - tol) if fs.fades == "high" else (own > edge + tol):
+            return None  # named inside the span: its reruns' drift is its numerics uncertainty
+        shown = ", ".join(f"{p['radius_scale']:g}x grains {p['value']:.4g} {fs.unit}"
+                          for p in check["values"])
+        return (f"its best level at the model's grains is the edge of the located span "
+                f"({fs.parameter} = {own:.4g} {fs.unit}) and the numerics check puts its "
+                f"optimum beyond that edge, towards the end where the effect fades, at every "
+                f"other grain size ({shown}): the named value is not resolved by the model's "
+                f"numerics")
+
+    def numerics_record(self, check: dict[str, Any], d: _Decision) -> None:
+        """Write a numerics check into the report: for the named effect, its uncertainty
+        becomes at least the check's (``hypotheses[*].full_model.numerics``,
+        ``fit.full_search.named.numerics``); for a withdrawn one, under
+        ``fit.full_search.withdrawn``."""
+        rep, name = self.rep, check["hypothesis"]
+        rep.simulations["numerics_simulations"] = (
+            int(rep.simulations.get("numerics_simulations", 0)) + int(check["runs"]))
+        if name != d.confirmed:
+            wd = rep.fit.setdefault("full_search", {}).setdefault("withdrawn", {})
+            wd[name] = {"reason": self.withdrawn.get(name), "numerics": check}
+            return
+        h = next((h for h in rep.hypotheses if h["name"] == name), None)
+        if h is None or "full_model" not in h:
+            return
+        p = self.searched[name].parameter
+        sd = check["uncertainty"]
         fm = h["full_model"]
         fm["numerics"] = {p: check}
         named = rep.fit["full_search"]["named"]
@@ -894,7 +1062,6 @@ class _Confirmation:
             named["uncertainty"] = sd
             if isinstance(h.get("uncertainty"), dict) and p in h["uncertainty"]:
                 h["uncertainty"] = {**h["uncertainty"], p: sd}
-        rep.simulations["numerics_simulations"] = len(rows)
 
     def settle(self, d: _Decision) -> None:
         """Make the report's best explanation, "after" fit, refitted signals and remaining

@@ -148,8 +148,12 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
         replicate_runs = [c for c in seeded if not any(k.startswith("physics.") for k in c)]
         assert replicate_runs == REPS
         levels = rep.fit["full_search"]["levels"]
-        searched = [lv for lv in levels if not lv["refined"]]
+        searched = [lv for lv in levels if not lv["refined"] and not lv["extension"]]
         assert len(searched) == n_all
+        # an extension level (beyond the floor's shallowest) runs on the beds as a level does
+        assert all(lv["hypothesis"] == "boundary_proximity" and lv.get("beds", 1) == beds
+                   for lv in levels if lv["extension"])
+        n_dep_ext = sum(lv["extension"] for lv in levels)
         for lv in searched:
             dep = lv["hypothesis"] in deposited
             assert lv.get("beds", 1) == (beds if dep else 1)
@@ -157,7 +161,8 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
         # replicate's seed, its other overrides those of bed 0
         bed_runs = [c for c in seeded if c not in REPS]
         pooled = [lv for lv in levels if "beds" in lv]
-        assert len(pooled) == (n_dep + sum(lv["refined"] for lv in pooled) if beds > 1 else 0)
+        assert len(pooled) == (n_dep + n_dep_ext + sum(lv["refined"] for lv in pooled)
+                               if beds > 1 else 0)
         assert len(bed_runs) == (beds - 1) * len(pooled)
         assert sorted(c["scenario.seed"] for c in bed_runs) == sorted(
             [2, 3][:beds - 1] * len(pooled))

@@ -134,9 +134,12 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * len(DROP.full_search["soil_layering"].values)
                      if rep.fit["full_search"].get("named") else 0)
-    assert 1 + top_k + n_levels <= len(calls) - n_num == rep.simulations["full_simulations"] \
-        <= 1 + top_k + n_levels + 1
     levels = rep.fit["full_search"]["levels"]
+    # extension levels run only while an effect's strong end fits best (at most its extension)
+    n_ext = sum(lv.get("beds", 1) for lv in levels if lv["extension"])
+    assert n_ext <= sum(len(fs.extension) for fs in DROP.full_search.values())
+    assert 1 + top_k + n_levels + n_ext <= len(calls) - n_num \
+        == rep.simulations["full_simulations"] <= 1 + top_k + n_levels + n_ext + 1
     assert len(levels) >= n_levels
     assert {lv["hypothesis"] for lv in levels} == set(DROP.full_search)
     assert all(lv["delta_bic_vs_reference"] is not None for lv in levels)
@@ -223,8 +226,10 @@ def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering
     assert n_levels == 24
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * (1 + n_layering) if rep.fit["full_search"].get("named") else 0)
-    assert n_levels <= len(search_calls) - n_num == rep.simulations["search_simulations"] \
-        <= n_levels + 1
+    n_ext = sum(lv.get("beds", 1) for lv in rep.fit["full_search"]["levels"] if lv["extension"])
+    # the search simulator's baseline, the levels, the extension levels, at most one refinement
+    assert 1 + n_levels + n_ext <= len(search_calls) - n_num \
+        == rep.simulations["search_simulations"] <= 1 + n_levels + n_ext + 1
     assert search_calls[0] == {}  # the search simulator's own baseline run comes first
     assert rep.fit["full_search"]["tier"] == "search simulator"
     assert rep.missing_physics == "soil_layering", rep.decision
@@ -1032,10 +1037,10 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
     below 38.7, or without a decisive rival (the floor's score 0.70, less than 0.02 above the
     reference's 0.691), name layering."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
-                                            _realisation_floor)
+    from crashdem.diagnosis.confirm import (REPLICATE, _ambiguity_margin, _Confirmation,
+                                            _FullTier, _realisation_floor)
 
-    def decide(deepest, floor_score=0.761):
+    def decide(deepest, floor_score=0.761, claim="soil_layering"):
         rows = ([_run("recalibration", 0.0, 0.691), _run("soil_layering", 18.0, 0.70)]
                 + [_run("soil_layering", db, sc, v) for db, sc, v in
                    ((-4.5, 0.616, 0.2), (12.9, 0.737, 0.3), (38.7, 0.748, 0.4),
@@ -1046,7 +1051,7 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
                 + [_run(REPLICATE, db, sc) for db, sc in ((-2.6, 0.595), (12.4, 0.589))])
         full = _FullTier(rows, 0.691, _realisation_floor(rows, 0.691))
         c = object.__new__(_Confirmation)
-        c.rep = type("R", (), {"missing_physics": "soil_layering", "fit": {}})()
+        c.rep = type("R", (), {"missing_physics": claim, "fit": {}})()
         c.searched, c.model_free = dict(FS), None
         return c, full, c.decide(full)
 
@@ -1062,6 +1067,24 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
     # recording 12 on the coarse tier: best at rolling resistance 0.2, the fading end)
     c, full, d = decide(74.8, floor_score=0.70)
     assert c.faded_out(full.rows) == {"soil_layering"} and d.confirmed == "soil_layering"
+    # ... when the screening claimed it; unclaimed, its located best (38.7) lies more than the
+    # replicates' scatter below the fading end (74.8): the optimum is beyond the span, and
+    # nothing is named (the Yade 10 m floor recording 12 was named layering so)
+    c, full, d = decide(74.8, floor_score=0.70, claim=None)
+    margin = _ambiguity_margin(full.floor)
+    assert 74.8 - 38.7 > margin and set(c.beyond_span(full.rows[1:], full.floor)) == {
+        "soil_layering"}
+    assert d.confirmed is None and "soil_layering" not in d.best_by_effect
+    why = c.verdicts(full, d)["soil_layering"]
+    assert why.endswith(f"its best run short of that end (0.4 m, Delta BIC 38.7) is more than "
+                        f"{margin:.3g} below it: the optimum lies beyond the span: names "
+                        f"nothing"), why
+    # within the margin of the end it stands by its located levels, claimed or not
+    c, full, d = decide(38.7 + 0.9 * _ambiguity_margin(full.floor), floor_score=0.70,
+                        claim=None)
+    assert c.faded_out(full.rows) == {"soil_layering"} and not c.beyond_span(
+        full.rows[1:], full.floor)
+    assert d.best_by_effect["soil_layering"]["search_value"] == 0.4
 
 
 def test_realisation_interval_of_a_named_value():
@@ -1329,3 +1352,131 @@ def test_search_tier_is_never_finer_or_larger_than_the_scenario(tmp_path):
             assert sim is not None and "coarse" in how, (ov, how)
         elif auto == "itself":
             assert sim is None and how.endswith("on the scenario itself"), (ov, how)
+
+
+@pytest.mark.parametrize("truth, runs, named", [(0.43, [0.5, 0.4], 0.4),
+                                                 (0.53, [0.5, 0.4], 0.5),
+                                                 (0.58, [0.5], 0.6),
+                                                 (0.75, [], 0.7),
+                                                 (0.2, [0.5, 0.4], 0.4)])
+def test_a_search_goes_on_beyond_its_strong_end_while_that_end_fits_best(truth, runs, named):
+    """The floor's levels (0.6 ... 1.25 m) end at 0.6 m on the strong side; a floor nearer than
+    that fits best at 0.6 m, so the next extension value (0.5 m, then 0.4 m) is run while the
+    strong end of the span run so far fits best, and no further (a profile peaked at the truth,
+    Delta BIC 60 - 100 |depth - truth|): a truth of 0.58 m runs 0.5 m and stops at the 0.6 m
+    optimum, one of 0.53 m runs 0.4 m to find 0.5 m the better. The extended span is what the refinement, the numerics
+    check and the report see; a floor deeper than 0.6 m runs nothing more. A truth beyond every
+    extension value stops at the last (0.4 m), which then is the strong end."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import _Confirmation
+
+    def prof(x):
+        return 60.0 - 100.0 * abs(x - truth)
+
+    asked: list = []
+    c = object.__new__(_Confirmation)
+    c.searched, c.beds, c.cfc_key = {"boundary_proximity": FS["boundary_proximity"]}, [{}], {}
+
+    def run(sim, requests):
+        asked.extend(x for _, _, x in requests)
+        return [_run(n, prof(x), 0.8, x) for n, _, x in requests]
+
+    c.run = run
+    rows = [_run("boundary_proximity", prof(x), 0.8, x) for x in FS["boundary_proximity"].values]
+    extra = c.extended(None, rows, lambda r: {**r, "finished": True})
+    assert asked == runs
+    assert [r["search_value"] for r in extra] == runs
+    assert all(r["extension"] and r["finished"] for r in extra)
+    fs = c.searched["boundary_proximity"]
+    assert fs.values == tuple(sorted((*runs, *FS["boundary_proximity"].values)))
+    assert fs.strong_end == min(fs.values) and len(fs.extension) == 2 - len(runs)
+    best = max([*rows, *extra], key=lambda r: r["delta_bic_vs_reference"])
+    assert best["search_value"] == named
+    assert FS["boundary_proximity"].extension == (0.5, 0.4)  # the catalogue is not changed
+
+
+def test_extension_values_must_lie_outward_from_the_strong_end():
+    from crashdem.diagnosis.catalogue import FullSearch
+
+    with pytest.raises(ValueError, match=r"extension=\(0.7,\).*outward from the strong end 0.6"):
+        FullSearch("floor_depth", "m", ("k",), (0.6, 0.8), extension=(0.7,))
+    with pytest.raises(ValueError, match=r"extension"):
+        FullSearch("c", "Pa", ("k",), (1.0, 2.0), scale="log", fades="low", extension=(1.5,))
+    fs = FullSearch("c", "Pa", ("k",), (1.0, 2.0), scale="log", fades="low", extension=(4.0,))
+    assert fs.strong_end == 2.0 and fs.extended().values == (1.0, 2.0, 4.0)
+    with pytest.raises(ValueError, match="no value left"):
+        fs.extended().extended()
+
+
+def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
+    """A named interface depth is withdrawn when its best level at the model's grains is the
+    edge of the located span (0.4 m, the last level short of the fading 0.5 m) and, at both
+    grain-radius factors of the numerics check, its profile's optimum lies beyond that edge:
+    the value was one bed's packing, not a located depth. The recording: layering at 0.33 m;
+    the stand-in model is the scenario ROM with its interface acting shallower than asked by
+    0.07 m at the own grains (so the 0.4 m level fits best) and by 0.25 m at another grain size
+    (so the reruns fit best at the deepest level, 0.5 m). Then nothing is named, the verdict
+    and the decision say why, the check is kept under ``fit.full_search.withdrawn``, and its
+    runs are counted. Controls keep the name: reruns that locate the optimum (no shift at the
+    other grains: 0.33 m), and a value named inside the span (no shift at the own grains: best
+    level 0.3 m) whose reruns drift out."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.confirm import _Confirmation, _Decision
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
+
+    fs = {"soil_layering": DROP.full_search["soil_layering"]}
+    truth = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(
+        fs["soil_layering"].overrides(0.33)))
+    recording = acquire(truth, np.random.default_rng(5))
+    inner = _scenario_rom_simulator([])
+
+    def diagnose_with(own_shift, other_shift):
+        def shallower(ov):
+            ov = dict(ov)
+            if "physics.soil_layering.depth" in ov:
+                d = own_shift if float(ov.get(RADIUS_SCALE_KEY, 1.0)) == 1.0 else other_shift
+                ov["physics.soil_layering.depth"] = max(ov["physics.soil_layering.depth"] - d,
+                                                        0.05)
+            return inner(ov)
+
+        return screen_then_confirm(simulate(RomParams()), recording, shallower, top_k=0,
+                                   full_search=fs, numerics=(0.9, 1.1))
+
+    rep = diagnose_with(0.07, 0.25)
+    assert rep.missing_physics is None, rep.decision
+    wd = rep.fit["full_search"]["withdrawn"]["soil_layering"]
+    assert [p["value"] for p in wd["numerics"]["values"]] == [0.5, 0.5]
+    assert wd["numerics"]["own_best_level"] == 0.4
+    assert "at every other grain size" in wd["reason"]
+    assert rep.fit["confirmation_verdicts"]["soil_layering"].startswith(
+        "named, then withdrawn: its best level at the model's grains is the edge")
+    assert "soil_layering withdrawn: " in rep.decision
+    assert rep.simulations["numerics_simulations"] == 2 * len(fs["soil_layering"].values)
+    assert "named" not in rep.fit["full_search"]
+
+    for own_shift, other_shift, best in ((0.07, 0.0, 0.4), (0.0, 0.25, 0.3)):
+        kept = diagnose_with(own_shift, other_shift)
+        assert kept.missing_physics == "soil_layering", kept.decision
+        assert "withdrawn" not in kept.fit["full_search"]
+        assert kept.fit["full_search"]["named"]["numerics"]["own_best_level"] == best
+
+    # the rule reads only a depositing effect's reruns, and only when every factor located a
+    # value: an unresolved restitution, or a failed rerun, withdraws nothing
+    c = object.__new__(_Confirmation)
+    c.searched = dict(DROP.full_search)
+
+    def why(name, values, own):
+        d = _Decision(name, {"search_value": own}, None, False, None)
+        return c.unresolved(d, {"hypothesis": name, "own_best_level": own, "values": [
+            {"radius_scale": f, "value": v} for f, v in zip((0.9, 1.1), values)]})
+
+    # the Yade 5 m cohesion 11 (floor named at 1.05 m) and floor 12 (layering at 0.4 m)
+    assert why("boundary_proximity", [1.25, 1.25], 1.05) is not None
+    assert why("soil_layering", [0.413, 0.5], 0.4) is not None
+    # the DEM floor 12, named inside the span at 0.8 m: its reruns' drift is its uncertainty
+    assert why("boundary_proximity", [1.056, 1.25], 0.8) is None
+    assert why("boundary_proximity", [1.25, 1.0], 1.05) is None
+    assert why("boundary_proximity", [None, 1.25], 1.05) is None
+    assert why("contact_damping", [0.5, 0.5], 0.3) is None
