@@ -414,7 +414,13 @@ class FullSearch:
 #: Each floor level deposits its own bed, as a floor in a test does (measured: a
 #: floor trimmed into the baseline's bed, grains below it removed, keeps the packing above it
 #: but leaves the grains next to the floor unloaded; with it 2 of the 4 DEM/Yade floor
-#: recordings and 2 others were named wrongly, against 0 and 1 with deposited beds)
+#: recordings and 2 others were named wrongly, against 0 and 1 with deposited beds).
+#: The floor's extension levels run only while its shallowest level fits best
+#: (``FullSearch.extension``): a Yade bed 0.6 m deep (13.7 m, command line) was named
+#: ``soil_layering`` until the floor went on to 0.4 m. Cohesion levels of 9.6e5 and 1.92e6 Pa
+#: were tried the same way and dropped: a Yade cohesion of 1e6 Pa (library path) went from a
+#: wrong floor to nothing named, but on the 13.7 m set of 48 effect recordings (seeds 11-16)
+#: two floors and a contact damping lost their right names (30 -> 27 named)
 DROP_FULL_SEARCH: dict[str, FullSearch] = {
     "soil_layering": FullSearch(
         "interface_depth", "m", ("physics.soil_layering.depth",),

@@ -990,6 +990,17 @@ class _Confirmation:
                   if r["hypothesis"] == name]
         own = _profile_optimum(own_lv, fs)
         own_best = _best_rows(own_lv).get(name)
+        # does a level at or beyond the edge of the located span fit strictly better than
+        # every level inside it? (a tie, e.g. a flat profile, places nothing at the edge)
+        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
+        tol = 1e-9 * max(abs(v) for v in fs.values)
+        inside = [r["delta_bic_vs_reference"] for r in own_lv if "delta_bic_vs_reference" in r
+                  and ((r["search_value"] < edge - tol) if fs.fades == "high"
+                       else (r["search_value"] > edge + tol))]
+        outside = [r["delta_bic_vs_reference"] for r in own_lv if "delta_bic_vs_reference" in r
+                   and ((r["search_value"] >= edge - tol) if fs.fades == "high"
+                        else (r["search_value"] <= edge + tol))]
+        at_edge = bool(outside) and (not inside or max(outside) > max(inside))
         x = float(d.best["search_value"])
         shifts = [abs(p["value"] - fs.value(own)) if fs.scale != "log" else
                   abs(fs.coord(p["value"]) - own) * x
@@ -998,43 +1009,51 @@ class _Confirmation:
         return {"hypothesis": name, "radius_scales": [float(f) for f in scales], "values": per,
                 "own_value": None if own is None else fs.value(own),
                 "own_best_level": None if own_best is None else float(own_best["search_value"]),
+                "own_at_edge": at_edge,
                 "uncertainty": sd,
                 "runs": len(rows), "wall_time_s": time.perf_counter() - t0}
 
     def unresolved(self, d: _Decision, check: Mapping[str, Any] | None) -> str | None:
-        """Why the named effect is withdrawn after its numerics check, or None: it deposits its
-        own bed (a floor or an interface depth), its best level at the simulation's own grains
-        is the last one short of the end where it fades (the edge of the located span), and at
-        every other grain-radius factor the optimum of its profile lies beyond that edge
-        (``FullSearch.located`` false). No grain size then places the value inside the span:
-        the value named is one bed's packing and grain size, not a located depth. A factor
-        whose profile located no optimum at all (failed runs) withdraws nothing, and neither
-        does a value named inside the span whose reruns drift out (that is the numerics
-        uncertainty, already reported). Measured on Yade recordings at 5 m (library path):
-        floor recording 12 was named ``soil_layering`` at 0.4 m (reruns 0.413 and 0.5 m) and
-        cohesion recording 11 a floor at 1.05 m (reruns 1.25 and 1.25 m), both wrongly; the
-        nine floors named rightly at 5-18.45 m had both reruns located, and the DEM-truth floor
-        12 (named at 0.80 m, reruns 1.056 and 1.25 m) keeps its right name."""
+        """Why the named effect is withdrawn after its numerics check, or None. Withdrawn when
+        no grain size places its optimum inside the span: its best level at the simulation's
+        own grains is the edge of the located span (the last level short of the end where it
+        fades) or that end itself, strictly better than every level inside the edge
+        (``own_at_edge``: a flat profile places nothing), and at every other grain-radius factor the optimum of its
+        profile lies beyond the edge (``FullSearch.located`` false). The value named is then
+        one bed's packing and grain size, not a located value. Never withdrawn: the screening's
+        claim (the screening model's own evidence for it, as in ``beyond_span``); a value named
+        inside the span whose reruns drift out (that is its numerics uncertainty, already
+        reported); a check with a factor whose profile located nothing (failed runs).
+        Measured on Yade recordings (library path): at 5 m floor recording 12 was named
+        ``soil_layering`` at 0.4 m (reruns 0.413 and 0.5 m) and cohesion recording 11 a floor at
+        1.05 m (reruns 1.25 and 1.25 m); at 13.7 m null 30 was named ``contact_damping`` at
+        restitution 0.1 while its own best level was 0.5 (reruns 0.5 and 0.5): all three
+        wrongly, none claimed by the screening. Kept: the DEM-truth floor 12 (named at 0.80 m,
+        reruns 1.056 and 1.25 m), the Yade damping recordings 11 / 12 at 18.45 m (best level
+        0.1, reruns 0.5), the Yade free rotation 12 through the command line (best level 0.2,
+        reruns 0.2, the screening's claim)."""
         name = d.confirmed
-        if check is None or name is None or check.get("hypothesis") != name:
+        if check is None or name is None or check.get("hypothesis") != name \
+                or name == self.rep.missing_physics:
             return None
         fs = self.searched.get(name)
         vals = [p["value"] for p in check["values"]]
         own = check.get("own_best_level")
-        if fs is None or not fs.deposits or not vals or own is None \
+        if fs is None or not vals or own is None \
                 or any(v is None for v in vals) or any(fs.located(v) for v in vals):
             return None
+        if not check.get("own_at_edge"):
+            # named inside the span (its reruns' drift is its numerics uncertainty), or a flat
+            # profile whose levels tie
+            return None
         edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
-        tol = 1e-9 * max(abs(v) for v in fs.values)
-        if (own < edge - tol) if fs.fades == "high" else (own > edge + tol):
-            return None  # named inside the span: its reruns' drift is its numerics uncertainty
         shown = ", ".join(f"{p['radius_scale']:g}x grains {p['value']:.4g} {fs.unit}"
                           for p in check["values"])
-        return (f"its best level at the model's grains is the edge of the located span "
-                f"({fs.parameter} = {own:.4g} {fs.unit}) and the numerics check puts its "
-                f"optimum beyond that edge, towards the end where the effect fades, at every "
-                f"other grain size ({shown}): the named value is not resolved by the model's "
-                f"numerics")
+        return (f"its best level at the model's grains ({fs.parameter} = {own:.4g} {fs.unit}) "
+                f"is at or beyond the edge of the located span ({edge:.4g} {fs.unit}) and the "
+                f"numerics check puts its optimum beyond that edge, towards the end where the "
+                f"effect fades, at every other grain size ({shown}): the named value is not "
+                f"resolved by the model's numerics")
 
     def numerics_record(self, check: dict[str, Any], d: _Decision) -> None:
         """Write a numerics check into the report: for the named effect, its uncertainty

@@ -1408,7 +1408,7 @@ def test_extension_values_must_lie_outward_from_the_strong_end():
         fs.extended().extended()
 
 
-def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
+def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn(monkeypatch):
     """A named interface depth is withdrawn when its best level at the model's grains is the
     edge of the located span (0.4 m, the last level short of the fading 0.5 m) and, at both
     grain-radius factors of the numerics check, its profile's optimum lies beyond that edge:
@@ -1418,8 +1418,11 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
     (so the reruns fit best at the deepest level, 0.5 m). Then nothing is named, the verdict
     and the decision say why, the check is kept under ``fit.full_search.withdrawn``, and its
     runs are counted. Controls keep the name: reruns that locate the optimum (no shift at the
-    other grains: 0.33 m), and a value named inside the span (no shift at the own grains: best
-    level 0.3 m) whose reruns drift out."""
+    other grains: 0.33 m), a value named inside the span (no shift at the own grains: best
+    level 0.3 m) whose reruns drift out, and the screening's claim. The screening model here
+    claims the layering (it is the truth's own form), so for the withdrawal its claim is
+    dropped, as when the screening names nothing."""
+    from crashdem.diagnosis import confirm
     from crashdem import scenario
     from crashdem.diagnosis.catalogue import DROP
     from crashdem.diagnosis.cli import rom_from_scenario
@@ -1432,7 +1435,15 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
     recording = acquire(truth, np.random.default_rng(5))
     inner = _scenario_rom_simulator([])
 
-    def diagnose_with(own_shift, other_shift):
+    def diagnose_with(own_shift, other_shift, claimed=False):
+        def screened(*a, **kw):
+            rep = diagnose(*a, **kw)
+            if not claimed:
+                rep.missing_physics = None
+            return rep
+
+        monkeypatch.setattr(confirm, "diagnose", screened)
+
         def shallower(ov):
             ov = dict(ov)
             if "physics.soil_layering.depth" in ov:
@@ -1451,25 +1462,34 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
     assert wd["numerics"]["own_best_level"] == 0.4
     assert "at every other grain size" in wd["reason"]
     assert rep.fit["confirmation_verdicts"]["soil_layering"].startswith(
-        "named, then withdrawn: its best level at the model's grains is the edge")
+        "named, then withdrawn: its best level at the model's grains (interface_depth = 0.4 m) "
+        "is at or beyond the edge of the located span")
     assert "soil_layering withdrawn: " in rep.decision
     assert rep.simulations["numerics_simulations"] == 2 * len(fs["soil_layering"].values)
     assert "named" not in rep.fit["full_search"]
 
-    for own_shift, other_shift, best in ((0.07, 0.0, 0.4), (0.0, 0.25, 0.3)):
-        kept = diagnose_with(own_shift, other_shift)
+    for own_shift, other_shift, best, claimed in ((0.07, 0.0, 0.4, False),
+                                                  (0.0, 0.25, 0.3, False),
+                                                  (0.07, 0.25, 0.4, True)):
+        kept = diagnose_with(own_shift, other_shift, claimed)
         assert kept.missing_physics == "soil_layering", kept.decision
         assert "withdrawn" not in kept.fit["full_search"]
         assert kept.fit["full_search"]["named"]["numerics"]["own_best_level"] == best
 
-    # the rule reads only a depositing effect's reruns, and only when every factor located a
-    # value: an unresolved restitution, or a failed rerun, withdraws nothing
+    # the rule on the measured values: only when every factor located a value, never on the
+    # screening's claim
     c = object.__new__(_Confirmation)
     c.searched = dict(DROP.full_search)
+    c.rep = type("R", (), {"missing_physics": None})()
 
-    def why(name, values, own):
+    def why(name, values, own, at_edge=None):
+        fs = c.searched[name]
+        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
+        if at_edge is None:
+            at_edge = own >= edge if fs.fades == "high" else own <= edge
         d = _Decision(name, {"search_value": own}, None, False, None)
-        return c.unresolved(d, {"hypothesis": name, "own_best_level": own, "values": [
+        return c.unresolved(d, {"hypothesis": name, "own_best_level": own,
+                                "own_at_edge": at_edge, "values": [
             {"radius_scale": f, "value": v} for f, v in zip((0.9, 1.1), values)]})
 
     # the Yade 5 m cohesion 11 (floor named at 1.05 m) and floor 12 (layering at 0.4 m)
@@ -1479,4 +1499,13 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn():
     assert why("boundary_proximity", [1.056, 1.25], 0.8) is None
     assert why("boundary_proximity", [1.25, 1.0], 1.05) is None
     assert why("boundary_proximity", [None, 1.25], 1.05) is None
-    assert why("contact_damping", [0.5, 0.5], 0.3) is None
+    # a flat profile: its first level is "best" at the fading end, but strictly nothing is
+    assert why("cohesion", [3e4, 3e4], 3e4, at_edge=False) is None
+    # Yade 13.7 m null 30: damping named at 0.1, its own best level the fading end 0.5
+    assert why("contact_damping", [0.5, 0.5], 0.5) is not None
+    # Yade 18.45 m damping 11 / 12: best level 0.1, reruns 0.5
+    assert why("contact_damping", [0.5, 0.5], 0.1) is None
+    # Yade free rotation 12 through the CLI: best level 0.2, reruns 0.2, the screening's claim
+    assert why("particle_rotation", [0.2, 0.2], 0.2) is not None
+    c.rep.missing_physics = "particle_rotation"
+    assert why("particle_rotation", [0.2, 0.2], 0.2) is None
