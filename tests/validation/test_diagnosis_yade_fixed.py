@@ -5,6 +5,7 @@ is needed: the run is intercepted where the case hands its configuration to Yade
 command where the script hands it to ``crashdem diagnose``)."""
 from __future__ import annotations
 
+import json
 import re
 import sys
 from pathlib import Path
@@ -274,3 +275,51 @@ def test_the_truth_radius_scales_only_the_grains(monkeypatch, tmp_path):
     with pytest.raises(SystemExit) as ex:
         main(["--truth-radius", "0.5"])
     assert ex.value.code == 2
+
+
+def test_a_killed_yade_run_leaves_no_temporary_files_behind(monkeypatch, tmp_path):
+    """``run_yade`` writes the history under ``<key>.tmp-<pid>`` and renames it when complete.
+    The temporary files of a killed run (another pid) and of a failed one are removed the next
+    time the same run is asked for, under the bed's lock; entries of other keys stay. Yade is
+    stood in for by a fake that writes the files the script writes."""
+    import subprocess
+
+    monkeypatch.setattr(cases, "yade_available", lambda: True)
+    fail = {"now": False}
+
+    def fake_run(cmd, **kw):
+        cfg = json.loads(Path(cmd[-1]).read_text())
+        if not fail["now"]:
+            np.save(cfg["out"] + ".npy", np.zeros((3, 4)))
+            Path(cfg["out"] + ".json").write_text(json.dumps({"steps": 3}))
+        else:
+            np.save(cfg["out"] + ".npy", np.zeros((1, 4)))  # died before its .json
+        return subprocess.CompletedProcess(cmd, 0 if not fail["now"] else 1, "", "boom")
+
+    monkeypatch.setattr(subprocess, "run", fake_run)
+    cfg = {"seed": 1, "radius": 0.1, "radius_spread": 0.1, "bed_depth": 1.0,
+           "tank_radius": 0.5, "young": 1e7, "density": 2600.0, "friction_angle": 30.0,
+           "stiffness_ratio": 0.25, "deposit_unbalanced": 0.01}
+    hist, info = cases.run_yade(cfg, tmp_path)
+    store = tmp_path / "diagnosis_yade"
+    key = next(p.name[:-4] for p in store.glob("*.npy"))
+    bed = Path(info["packing_npz"])
+    # a driver killed after Yade wrote its files, and a bed half-written by another run
+    stale = [store / f"{key}.tmp-424242.npy", store / f"{key}.tmp-424242.json",
+             bed.parent / f"{bed.name}.tmp-424243.npz"]
+    other = store / "otherkey.tmp-424242.npy"
+    for f in (*stale, other):
+        f.write_bytes(b"x")
+    for f in (store / f"{key}.npy", store / f"{key}.json"):
+        f.unlink()
+    hist, info = cases.run_yade(cfg, tmp_path)
+    assert hist.shape == (3, 4) and info["steps"] == 3
+    assert not any(f.exists() for f in stale) and other.exists()
+    assert not list(store.glob(f"{key}.tmp-*"))
+    # a failed run raises and leaves neither an entry nor its temporary files
+    for f in (store / f"{key}.npy", store / f"{key}.json"):
+        f.unlink()
+    fail["now"] = True
+    with pytest.raises(RuntimeError, match="yade failed"):
+        cases.run_yade(cfg, tmp_path)
+    assert not (store / f"{key}.npy").exists() and not list(store.glob(f"{key}.tmp-*"))

@@ -200,6 +200,16 @@ def _fingerprint() -> str:
     return hashlib.sha256(SCRIPT.read_bytes() + HISTORY.read_bytes()).hexdigest()[:12]
 
 
+def _remove_leftovers(store: Path, key: str, packing_npz: Path) -> list[Path]:
+    """Remove the temporary files a killed run of ``key`` (history ``<key>.tmp-<pid>.npy`` /
+    ``.json``) or of its bed (``<bed>.npz.tmp-<pid>.npz``) left behind; call with the bed's lock
+    held. Returns what was removed."""
+    gone = [*store.glob(f"{key}.tmp-*"), *packing_npz.parent.glob(f"{packing_npz.name}.tmp-*")]
+    for f in gone:
+        f.unlink(missing_ok=True)
+    return gone
+
+
 def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = None
              ) -> tuple[np.ndarray, dict[str, Any]]:
     """Run (or load) one Yade impact; returns the history (t, z, vz, Fz) and the run facts.
@@ -227,6 +237,9 @@ def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = 
         # so a killed run leaves no entry that looks finished
         with _build_lock(Path(packing_npz)):
             if not Path(str(out) + ".npy").exists():
+                # under the bed's lock no other process writes this key or this bed: any
+                # temporary file of them is a killed run's leftover
+                _remove_leftovers(store, key, Path(packing_npz))
                 tmp = store / f"{key}.tmp-{os.getpid()}"
                 cfg["out"] = str(tmp)
                 cfg_path = store / f"{key}.cfg.json"
@@ -235,6 +248,7 @@ def run_yade(cfg: dict[str, Any], cache: Path, packing_npz: str | Path | None = 
                                       capture_output=True, text=True, cwd=str(store),
                                       timeout=3600)
                 if not (Path(str(tmp) + ".npy").exists() and Path(str(tmp) + ".json").exists()):
+                    _remove_leftovers(store, key, Path(packing_npz))
                     raise RuntimeError(f"yade failed:\n{proc.stdout[-3000:]}\n"
                                        f"{proc.stderr[-3000:]}")
                 os.replace(str(tmp) + ".json", str(out) + ".json")
