@@ -374,7 +374,7 @@ class FullSearch:
         """The level at the end of the span opposite ``fades`` (where the effect is strongest)."""
         return self.values[0] if self.fades == "high" else self.values[-1]
 
-    def extended(self) -> "FullSearch":
+    def extended(self) -> FullSearch:
         """This search with the next ``extension`` value added to its levels (it becomes the
         strong end) and removed from ``extension``; ValueError when none is left."""
         if not self.extension:
@@ -382,14 +382,29 @@ class FullSearch:
         return replace(self, values=tuple(sorted((*self.values, self.extension[0]))),
                        extension=self.extension[1:])
 
+    @property
+    def tolerance(self) -> float:
+        """How near two values of this search count as the same level."""
+        return 1e-9 * max(abs(v) for v in self.values)
+
+    @property
+    def edge(self) -> float:
+        """The edge of the located span: the last level short of the fading end."""
+        return self.values[-2] if self.fades == "high" else self.values[1]
+
     def located(self, value: float) -> bool:
         """True when ``value`` lies within the levels short of the fading end, i.e. not at the
         last level towards ``fades`` nor in the interval before it (a refinement vertex there
         is pulled by the fading level)."""
-        tol = 1e-9 * max(abs(v) for v in self.values)
         if self.fades == "high":
-            return value <= self.values[-2] + tol
-        return value >= self.values[1] - tol
+            return value <= self.edge + self.tolerance
+        return value >= self.edge - self.tolerance
+
+    def inside(self, value: float) -> bool:
+        """True when ``value`` lies strictly short of the ``edge`` of the located span."""
+        if self.fades == "high":
+            return value < self.edge - self.tolerance
+        return value > self.edge + self.tolerance
 
     def overrides(self, value: float) -> dict[str, Any]:
         """Scenario overrides of the level ``value``."""

@@ -575,8 +575,7 @@ class _Confirmation:
                 fs = self.searched[name]
                 top = _best_rows(r for r in _scored_levels([*rows, *extra])
                                  if r["hypothesis"] == name).get(name)
-                tol = 1e-9 * max(abs(v) for v in fs.values)
-                if top is None or abs(float(top["search_value"]) - fs.strong_end) > tol:
+                if top is None or abs(float(top["search_value"]) - fs.strong_end) > fs.tolerance:
                     break
                 self.searched[name] = fs = fs.extended()
                 new = self.pooled(self.run(sim, self.level_requests(name, fs.strong_end)))
@@ -992,14 +991,10 @@ class _Confirmation:
         own_best = _best_rows(own_lv).get(name)
         # does a level at or beyond the edge of the located span fit strictly better than
         # every level inside it? (a tie, e.g. a flat profile, places nothing at the edge)
-        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
-        tol = 1e-9 * max(abs(v) for v in fs.values)
-        inside = [r["delta_bic_vs_reference"] for r in own_lv if "delta_bic_vs_reference" in r
-                  and ((r["search_value"] < edge - tol) if fs.fades == "high"
-                       else (r["search_value"] > edge + tol))]
-        outside = [r["delta_bic_vs_reference"] for r in own_lv if "delta_bic_vs_reference" in r
-                   and ((r["search_value"] >= edge - tol) if fs.fades == "high"
-                        else (r["search_value"] <= edge + tol))]
+        scored = [r for r in own_lv if "delta_bic_vs_reference" in r]
+        inside = [r["delta_bic_vs_reference"] for r in scored if fs.inside(r["search_value"])]
+        outside = [r["delta_bic_vs_reference"] for r in scored
+                   if not fs.inside(r["search_value"])]
         at_edge = bool(outside) and (not inside or max(outside) > max(inside))
         x = float(d.best["search_value"])
         shifts = [abs(p["value"] - fs.value(own)) if fs.scale != "log" else
@@ -1018,10 +1013,10 @@ class _Confirmation:
         no grain size places its optimum inside the span: its best level at the simulation's
         own grains is the edge of the located span (the last level short of the end where it
         fades) or that end itself, strictly better than every level inside the edge
-        (``own_at_edge``: a flat profile places nothing), and at every other grain-radius factor the optimum of its
-        profile lies beyond the edge (``FullSearch.located`` false). The value named is then
-        one bed's packing and grain size, not a located value. Never withdrawn: the screening's
-        claim (the screening model's own evidence for it, as in ``beyond_span``); a value named
+        (``own_at_edge``: a flat profile places nothing), and at every other grain-radius
+        factor the optimum of its profile lies beyond the edge (``FullSearch.located`` false).
+        The value named is then one bed's packing and grain size, not a located value. Never
+        withdrawn: the screening's claim (the screening model's own evidence for it, as in ``beyond_span``); a value named
         inside the span whose reruns drift out (that is its numerics uncertainty, already
         reported); a check with a factor whose profile located nothing (failed runs).
         Measured on Yade recordings (library path): at 5 m floor recording 12 was named
@@ -1046,11 +1041,10 @@ class _Confirmation:
             # named inside the span (its reruns' drift is its numerics uncertainty), or a flat
             # profile whose levels tie
             return None
-        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
         shown = ", ".join(f"{p['radius_scale']:g}x grains {p['value']:.4g} {fs.unit}"
                           for p in check["values"])
         return (f"its best level at the model's grains ({fs.parameter} = {own:.4g} {fs.unit}) "
-                f"is at or beyond the edge of the located span ({edge:.4g} {fs.unit}) and the "
+                f"is at or beyond the edge of the located span ({fs.edge:.4g} {fs.unit}) and the "
                 f"numerics check puts its optimum beyond that edge, towards the end where the "
                 f"effect fades, at every other grain size ({shown}): the named value is not "
                 f"resolved by the model's numerics")

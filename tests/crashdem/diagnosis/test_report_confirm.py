@@ -1484,7 +1484,7 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn(monkeypatc
 
     def why(name, values, own, at_edge=None):
         fs = c.searched[name]
-        edge = fs.values[-2] if fs.fades == "high" else fs.values[1]
+        edge = fs.edge
         if at_edge is None:
             at_edge = own >= edge if fs.fades == "high" else own <= edge
         d = _Decision(name, {"search_value": own}, None, False, None)
