@@ -17,7 +17,8 @@ centred on the z axis, a box centred on the origin. Every grain must lie inside 
 (a grain may overlap a wall by ``WALL_OVERLAP`` of its radius, the contact overlap a settled bed
 has against its walls); the first grain outside is named in the error. The grains take the
 scenario's soil material; with ``physics.soil_layering`` on, those whose centre lies deeper than
-``physics.soil_layering.depth`` below the bed's top take the lower layer's material.
+``physics.soil_layering.depth`` below the bed's free surface (``free_surface``) take the lower
+layer's material, as a stiffness-only layer of a deposited bed does below its nominal top.
 """
 from __future__ import annotations
 
@@ -134,6 +135,44 @@ def _outside(scen: Scenario, x: np.ndarray, r: np.ndarray, top: float) -> tuple[
     return None
 
 
+#: grains needed in the central footprint of an imported bed to locate its free surface
+SURFACE_MIN_GRAINS = 10
+#: the footprint keeps this many mean grain radii clear of the container's walls
+SURFACE_WALL_CLEARANCE = 3.0
+
+
+def free_surface(scen: Scenario, x: np.ndarray, r: np.ndarray) -> float:
+    """Height [m] of an imported bed's free surface (``soil.packing.free_surface_height``): the
+    level at which the solid fraction of horizontal sections through the container's central
+    footprint -- its cross-section with ``SURFACE_WALL_CLEARANCE`` mean radii kept clear of
+    the walls -- falls for the last time to half of the bed's own. For a bed cut where the
+    grain centres pass a height, as crashdem deposits its layers, this is that height to within
+    a fraction of a radius: a layer depth then means the same on an imported bed as on a
+    deposited one (below the free surface), whatever grain happens to stand highest.
+    ``ScenarioError`` naming ``physics.soil_layering.depth`` when fewer than
+    ``SURFACE_MIN_GRAINS`` grains lie in the footprint."""
+    from soil.packing import free_surface_height
+
+    clear = SURFACE_WALL_CLEARANCE * float(np.mean(r))
+    if scen["container.shape"] == "cylinder":
+        within = 0.5 * scen["container.diameter"] - clear
+        inside = np.hypot(x[:, 0], x[:, 1]) < within
+        area = math.pi * max(within, 0.0) ** 2
+    else:
+        hx = 0.5 * scen["container.length"] - clear
+        hy = 0.5 * scen["container.width"] - clear
+        inside = (np.abs(x[:, 0]) < hx) & (np.abs(x[:, 1]) < hy)
+        area = 4.0 * max(hx, 0.0) * max(hy, 0.0)
+    n = int(np.count_nonzero(inside))
+    if n < SURFACE_MIN_GRAINS or area <= 0.0:
+        raise ScenarioError(
+            f"physics.soil_layering.depth={scen['physics.soil_layering.depth']!r}: the depth is "
+            f"counted from the imported bed's free surface, located in the container's central "
+            f"footprint ({SURFACE_WALL_CLEARANCE:g} mean radii clear of the walls), which holds "
+            f"{n} grains of {str(scen[FIELD])!r}; needs at least {SURFACE_MIN_GRAINS}")
+    return float(free_surface_height(x[inside, 2], r[inside], area))
+
+
 def check_scenario(scen: Scenario) -> None:
     """Refuse what an imported bed cannot take, before the file is read: a floor depth
     (``physics.boundary_proximity.floor_depth`` re-deposits the bed; the file's bed has its own
@@ -149,8 +188,8 @@ def check_scenario(scen: Scenario) -> None:
 def imported_packing(scen: Scenario, spec: Any, container_top: float) -> Any:
     """The ``soil.packing.Packing`` of the scenario's ``soil.packing_file`` with the materials of
     its deposition spec ``spec`` (``crashdem.run.packing_spec``): the upper soil for every
-    grain, the lower layer's below ``physics.soil_layering.depth`` from the bed's top when the
-    layering is on. ``container_top`` [m]: the height of the container's walls."""
+    grain, the lower layer's below ``physics.soil_layering.depth`` from the bed's free surface
+    (``free_surface``) when the layering is on. ``container_top`` [m]: the height of the container's walls."""
     from soil import packing as pk
 
     path = Path(scen["soil.packing_file"])
@@ -164,13 +203,21 @@ def imported_packing(scen: Scenario, spec: Any, container_top: float) -> Any:
                             f"a grain may overlap a wall by {WALL_OVERLAP:g} of its radius. "
                             "Remove grains that escaped the container, or set the container "
                             "to the bed's")
+    from crashdem.run import lower_grains, soil_material
+
     top = float(np.max(x[:, 2] + r))
     material = np.zeros(len(r), dtype=np.int32)
+    materials = (spec.materials[0],)
     if scen["physics.soil_layering.enabled"]:
-        material[x[:, 2] < top - float(scen["physics.soil_layering.depth"])] = 1
+        surface = free_surface(scen, x, r)
+        material[lower_grains(scen, x, surface)] = 1
+        materials = (spec.materials[0], soil_material(scen, lower=True))
+        info_layer = {"free_surface_z": surface}
+    else:
+        info_layer = {}
     digest = hashlib.sha256(path.read_bytes()).hexdigest()
     info = {"source": "imported", "packing_file": str(path), "packing_file_sha256": digest,
-            "grains": int(len(r)), "bed_top_z": top}
-    return pk.Packing(x=x, radius=r, material=material, materials=tuple(spec.materials),
+            "grains": int(len(r)), "bed_top_z": top, **info_layer}
+    return pk.Packing(x=x, radius=r, material=material, materials=materials,
                       spec={"imported": str(path), "sha256": digest}, seed=0,
                       porosity=math.nan, porosity_region=None, info=info)

@@ -705,6 +705,8 @@ def build_glider_model(scen: Scenario, cache_dir, progress=None):
     g = rn.GRAVITY
     spec_p = rn.packing_spec(scen)
     packing = pk.cached(spec_p, cache_dir, progress=progress)
+    if scen["physics.soil_layering.enabled"] and not scen["physics.soil_layering.compacted"]:
+        rn.stiffness_layer(scen, packing)  # refuses the glider, naming the field
     mats = rn.impact_materials(scen, packing)
     wall_mat, imp_mat = len(packing.materials), len(packing.materials) + 1
     mats[imp_mat] = replace(mats[imp_mat],

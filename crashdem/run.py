@@ -86,6 +86,33 @@ def soil_material(scen: Scenario, lower: bool = False):
                          name="soil_lower" if lower else "soil_upper")
 
 
+def lower_grains(scen: Scenario, x: np.ndarray, top: float) -> np.ndarray:
+    """The grains of the lower layer of a bed deposited whole (stiffness-only layering, an
+    imported bed): those whose centre lies deeper than ``physics.soil_layering.depth`` below the
+    bed's top ``top`` [m]."""
+    return x[:, 2] < float(top) - float(scen["physics.soil_layering.depth"])
+
+
+def stiffness_layer(scen: Scenario, packing):
+    """``packing`` (deposited whole, as without the layering) with its lower grains given the
+    lower layer's material: ``physics.soil_layering.compacted = false``, a stiffness
+    discontinuity with no change of packing. The bed is the unlayered scenario's own, so its
+    cache entry is shared with it. The interface lies ``depth`` below the bed's nominal top
+    (``soil_depth``, where deposition cuts the grain centres: the level a compacted lower layer
+    is deposited up to), so a depth means the same in both forms and on every packing seed
+    (the highest grain's top, a single grain, scatters by a radius between packings)."""
+    if scen["scenario.kind"] != "drop_test":
+        raise ScenarioError("physics.soil_layering.compacted=false: a stiffness-only layer is "
+                            "supported for scenario.kind='drop_test' only (the glider's container "
+                            "deposits its compacted part); allowed: true")
+    material = np.array(packing.material, dtype=np.int32, copy=True)
+    material[lower_grains(scen, packing.x, soil_depth(scen))] = 1
+    info = dict(packing.info or {})
+    info["stiffness_layer_grains"] = int(np.count_nonzero(material == 1))
+    return replace(packing, material=material,
+                   materials=(packing.materials[0], soil_material(scen, lower=True)), info=info)
+
+
 def soil_depth(scen: Scenario) -> float:
     d = scen["container.soil_depth"]
     if scen["physics.boundary_proximity.enabled"] and scen["physics.boundary_proximity.floor_depth"] is not None:
@@ -110,6 +137,7 @@ def packing_spec(scen: Scenario):
             raise ScenarioError(
                 f"physics.soil_layering.depth={z_d!r}: must be in (0, {depth:g}) [m], inside the "
                 "soil layer")
+    if scen["physics.soil_layering.enabled"] and scen["physics.soil_layering.compacted"]:
         materials.append(soil_material(scen, lower=True))
         layers = (
             pk.LayerSpec(depth - z_d, material=1,
@@ -280,6 +308,8 @@ def build_model(scen: Scenario, cache_dir: str | os.PathLike, progress=None) -> 
         packing = imported_packing(scen, spec_p, _container_top(scen))
     else:
         packing = pk.cached(spec_p, cache_dir)
+        if scen["physics.soil_layering.enabled"] and not scen["physics.soil_layering.compacted"]:
+            packing = stiffness_layer(scen, packing)
     mats = impact_materials(scen, packing)
     wall_mat, imp_mat = len(packing.materials), len(packing.materials) + 1
     particles = soil.Particles(x=packing.x, radius=packing.radius, material=packing.material,
@@ -571,6 +601,8 @@ def _run_scenario(scen: Scenario, path: Path, progress: bool, resume: bool,
             "wall_s": time.perf_counter() - wall0}
     if saved is not None:
         info["resumed_from_t"] = float(saved.t)
+    if "stiffness_layer_grains" in m.packing.info:
+        info["stiffness_layer_grains"] = int(m.packing.info["stiffness_layer_grains"])
     if m.packing.info.get("source") == "imported":
         info.update(packing_file=m.packing.info["packing_file"],
                     packing_file_sha256=m.packing.info["packing_file_sha256"])

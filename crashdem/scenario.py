@@ -217,6 +217,7 @@ SCHEMA: dict[str, Any] = {
             "lower_young_factor": F(3.0, "1", 0.01, 100, doc="lower-layer E / upper-layer E"),
             "lower_porosity": F(None, "1", 0.26, 0.6, doc="lower-layer target porosity, reached by a friction search on a trial column (null = use lower_deposition_friction_deg)", nullable=True),
             "lower_deposition_friction_deg": F(6.0, "deg", 0, 90, hi_open=True, doc="friction while depositing the lower layer (compacted): 6 deg gives porosity ~0.41 and settles 4x faster than 0 deg (~0.36)"),
+            "compacted": B(True, doc="true: the lower layer is deposited on its own, denser (lower_porosity / lower_deposition_friction_deg) and stiffer; false: stiffness only -- the bed is deposited whole as without the layering and the grains whose centre lies deeper than depth below its nominal top (the soil depth, where deposition cuts the centres) take lower_young_factor x E (drop tests; an imported bed is always stiffness only, its depth counted from its free surface)"),
         },
         "boundary_proximity": {
             "enabled": B(False, doc="rigid floor or wall nearer than modelled / different wall compliance"),

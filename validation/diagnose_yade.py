@@ -77,16 +77,6 @@ def _errors(fitted: dict, values: dict) -> dict[str, float]:
 ON_BED_DIR = "yade_beds"
 
 
-def _drawn_values(case) -> dict[str, float]:
-    """The comparable truth as drawn (``cases.drawn_values``): on the case's own bed an
-    interface depth means the same in both codes (below the bed's highest grain top:
-    ``yade_truth.py`` and ``crashdem.beds.imported_packing`` alike), so
-    ``cases.realised_depths`` does not apply."""
-    from validation.diagnosis_yade.cases import drawn_values
-
-    return drawn_values(case.drawn)
-
-
 def _check_on_bed(effect: str | None) -> None:
     if effect == "boundary_proximity":
         raise ValueError("on_yade_bed: a floor case's Yade bed is the shallow bed itself, so "
@@ -140,7 +130,6 @@ def diagnose_case(effect: str | None, seed: int, top_k: int = TOP_K,
     effect, case, values = make_case(effect, seed, filter_class, raw, fixed, recalibration)
     t1 = time.perf_counter()
     if on_yade_bed:
-        values = values if filter_class else _drawn_values(case)
         with _on_bed(case.meta):
             rep = screen_then_confirm(dem_baseline(), case.recording, DemFullSimulator(),
                                       top_k=top_k, impact_speed=impact_speed(),
@@ -200,8 +189,6 @@ def cli_case(effect: str | None, seed: int, out: str | Path, scenario: str | Pat
         _check_on_bed(effect)
     t0 = time.perf_counter()
     effect, case, values = make_case(effect, seed, filter_class, raw, fixed, recalibration)
-    if on_yade_bed and not filter_class:
-        values = _drawn_values(case)
     name = f"{'filter_class' if filter_class else effect or 'null'}_{seed}" + "".join(
         f"_{k.rsplit('.', 1)[1]}={v:g}" for k, v in sorted(case.recalibration.items()))
     d = Path(out) / name

@@ -627,6 +627,10 @@ def _search_on_itself(scen, mode: str) -> tuple[bool, float | None]:
     return load <= AUTO_FULL_LOAD, load
 
 
+#: the form (``catalogue.FullSearch.forms``) a search on an imported bed keeps
+IMPORTED_BED_FORM = "stiffness"
+
+
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path,
                   packing_cache: Path | None = None) -> tuple[dict[str, Any], Any, str]:
     """The full-model search of ``crashdem diagnose`` (``--full-search``): the effects searched
@@ -649,10 +653,15 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         return {}, None, "off" if mode == "off" else "not available for the glider"
     searched = {}
     unsearched = []
+    bed = imported_bed(scen)
     for k, fs in DROP.full_search.items():
         if scen.get(f"physics.{k}.enabled") or (k == "particle_rotation"
                                                 and scen.get("soil.rotation") == "free"):
             continue
+        if bed is not None and fs.forms and IMPORTED_BED_FORM in dict(fs.forms):
+            # an imported bed is not re-deposited: its layer is the stiffness form alone
+            # (crashdem.beds), and the other form would repeat its runs
+            fs = fs.with_form(IMPORTED_BED_FORM)
         # levels the scenario cannot take are dropped (a floor above its layering interface is
         # taken: it ends the column there, distributed.scenario_overrides; an imported bed takes
         # no floor depth, crashdem.beds.check_scenario)
@@ -662,7 +671,6 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         else:
             unsearched.append(k)
     coarse = search_tier(scen)
-    bed = imported_bed(scen)
     note = ""
     if unsearched:
         why = ("the imported bed (soil.packing_file) has its own floor" if bed is not None

@@ -195,6 +195,14 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         for name, b in (search.get("best") or {}).items():
             lines.append(f"| {name} | {_fmt(b['value'], 4)} | {_fmt(b['score'])} | "
                          f"{b['delta_bic_vs_reference']:.1f} |")
+        for name, fc in (search.get("forms") or {}).items():
+            each = "; ".join(
+                f"{f}: {'no level ran' if b is None else 'best level ' + _fmt(b['value'], 4)}"
+                + ("" if b is None else f", Delta BIC {b['delta_bic_vs_reference']:.1f}")
+                for f, b in fc["forms"].items())
+            lines += ["", (f"{name} ran in each of its forms ({each}); the {fc['chosen']} "
+                          f"form fits best (by its best {fc.get('by', 'level')}) and is the one "
+                          "searched further.")]
         named = search.get("named")
         if named and named.get("interval"):
             par = named["parameter"]

@@ -70,18 +70,38 @@ def test_text_rows_read_as_the_npz(tmp_path):
 
 
 def test_layering_gives_the_lower_material_below_its_depth(tmp_path):
-    z = np.linspace(0.1, 0.9, 9)
-    x = np.column_stack([np.zeros(9), np.zeros(9), z])
-    r = np.full(9, 0.05)
+    """On an imported bed the depth counts from the bed's free surface (``beds.free_surface``),
+    not from its highest grain: a grain standing on top of a regular bed of four tiers moves
+    the highest top by a diameter and the interface not at all; a bed too small to show a
+    surface is refused, naming the field."""
+    from crashdem.beds import free_surface
+
+    r0 = 0.05
+    g = np.arange(-0.4, 0.4 + 1e-9, 2 * r0)
+    xx, yy, zz = np.meshgrid(g, g, r0 + 2 * r0 * np.arange(4), indexing="ij")
+    x = np.column_stack([xx.ravel(), yy.ravel(), zz.ravel()])  # tiers' top at 0.4 m
+    x = np.vstack([x, [[0.0, 0.0, 0.4 + r0]]])  # one grain standing on the top tier
+    r = np.full(len(x), r0)
     np.savez(tmp_path / "b.npz", x=x, radius=r)
     scen = _scen(**{"soil.packing_file": str(tmp_path / "b.npz"),
                     "physics.soil_layering.enabled": True,
-                    "physics.soil_layering.depth": 0.3})
+                    "physics.soil_layering.depth": 0.15})
+    surface = free_surface(scen, x, r)
+    assert surface == pytest.approx(0.4, abs=0.5 * r0)
     p = imported_packing(scen, packing_spec(scen), _container_top(scen))
-    top = 0.95
-    assert p.material.tolist() == [1 if zi < top - 0.3 else 0 for zi in z]
+    assert p.material.tolist() == [1 if zi < surface - 0.15 else 0 for zi in x[:, 2]]
+    assert 0 < int(np.sum(p.material)) < len(x)
+    # the two lowest tiers (centres 0.05, 0.15 m) are below 0.4 - 0.15 = 0.25 m; the highest
+    # top (0.5 m) would also have put the third tier (0.25 m) below its 0.35 m
+    assert set(np.round(x[p.material == 1, 2], 6)) == {0.05, 0.15}
+    assert p.info["free_surface_z"] == surface
     assert p.materials[1].young == pytest.approx(
         p.materials[0].young * scen["physics.soil_layering.lower_young_factor"])
+    np.savez(tmp_path / "few.npz", x=x[:9], radius=r[:9])
+    few = _scen(**{"soil.packing_file": str(tmp_path / "few.npz"),
+                   "physics.soil_layering.enabled": True, "physics.soil_layering.depth": 0.15})
+    with pytest.raises(ScenarioError, match="physics.soil_layering.depth=0.15.*needs at least 10"):
+        imported_packing(few, packing_spec(few), _container_top(few))
 
 
 def _refused(tmp_path, x, r, match, **kw):
@@ -136,3 +156,56 @@ def test_the_glider_refuses_an_imported_bed(tmp_path):
                    {"soil.packing_file": str(tmp_path / "b.npz")})
     with pytest.raises(ScenarioError, match="soil.packing_file.*drop_test' only"):
         build_model(scen, tmp_path)
+
+
+def test_stiffness_only_layer_is_the_unlayered_bed_with_stiffer_lower_grains(tmp_path):
+    """``physics.soil_layering.compacted = false``: the bed is the unlayered scenario's own (one
+    packing file in the cache, the same grains), the grains deeper than the depth below its
+    nominal top (container.soil_depth) take lower_young_factor x E, and the run equals the run
+    on that bed imported with the same layering at the depth the imported convention (below
+    the bed's free surface) puts at the same level, bit for bit; a stiffer lower layer
+    shallower than the sphere's penetration stops it sooner than the unlayered bed."""
+    import h5py as _h5
+
+    layered = {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": 0.12,
+               "physics.soil_layering.lower_young_factor": 20.0,
+               "physics.soil_layering.compacted": False}
+    plain = run_scenario(_scen(), out_dir=tmp_path / "runs", progress=False)
+    stiff = run_scenario(_scen(**layered, **{"scenario.name": "tiny_stiff_layer"}),
+                         out_dir=tmp_path / "runs", progress=False)
+    cache = plain.parent / "packings"
+    assert stiff.parent / "packings" == cache
+    assert len(list(cache.glob("packing-*.h5"))) == 1
+    bed = pk.cached(packing_spec(_scen()), cache)
+    assert packing_spec(_scen(**layered)) == packing_spec(_scen())
+    f = tmp_path / "bed.npz"
+    np.savez(f, x=bed.x, radius=bed.radius)
+    from crashdem.beds import free_surface
+
+    top = float(np.max(bed.x[:, 2] + bed.radius))
+    nominal = _scen()["container.soil_depth"]
+    surface = free_surface(_scen(**{"soil.packing_file": str(f)}), bed.x, bed.radius)
+    same_level = {**layered, "physics.soil_layering.depth": surface - (nominal - 0.12)}
+    imported = run_scenario(_scen(**same_level, **{"soil.packing_file": str(f),
+                                                   "scenario.name": "tiny_stiff_layer"}),
+                            out_dir=tmp_path / "imp", progress=False)
+    a, b, c = _channels(plain), _channels(stiff), _channels(imported)
+    for k in CHANNELS:
+        assert np.array_equal(b[k], c[k]), k
+    with _h5.File(stiff) as h:
+        n_lower = int(h["run"].attrs["stiffness_layer_grains"])
+    assert n_lower == int(np.count_nonzero(bed.x[:, 2] < nominal - 0.12)) > 0
+    assert n_lower < int(np.count_nonzero(bed.x[:, 2] < top - 0.12))  # not the top's level
+    # deeper penetration is a more negative velocity integral; the stiff layer holds the sphere
+    va, vb = a["drop_mass_velocity_z"], b["drop_mass_velocity_z"]
+    assert np.sum(vb) > np.sum(va)
+    assert np.max(b["drop_mass_contact_force_z"]) > 1.05 * np.max(a["drop_mass_contact_force_z"])
+
+
+def test_stiffness_only_layer_is_refused_for_the_glider():
+    from crashdem.run import stiffness_layer
+
+    scen = sc.load(ROOT / "validation/scenarios/glider_real.toml",
+                   {"physics.soil_layering.compacted": False})
+    with pytest.raises(ScenarioError, match="physics.soil_layering.compacted=false.*allowed: true"):
+        stiffness_layer(scen, None)

@@ -110,7 +110,7 @@ def test_dask_confirmation_equals_serial(client, layering_case, tmp_path):
         return {new: res[name] for name, new in CHANNELS.items()}
 
     baseline, rec = simulate(RomParams()), layering_case.recording
-    # the 1 + k confirmation batch (the full-model search adds 24 levels to the same batch and
+    # the 1 + k confirmation batch (the full-model search adds 30 level runs to the same batch and
     # is covered in test_report_confirm.py)
     a = screen_then_confirm(baseline, rec, serial_full, top_k=TOP_K, full_search=False)
     full = DaskFullSimulator(base, tmp_path / "confirmation.h5", channel_map=CHANNELS,

@@ -167,6 +167,14 @@ def test_search_setup_on_an_imported_bed(tmp_path):
     assert sim is None and "boundary_proximity" not in searched
     assert {"soil_layering", "cohesion", "contact_damping", "particle_rotation"} <= set(searched)
     assert "the imported bed" in how and "not searched: boundary_proximity" in how
+    # an imported bed is not re-deposited: its layer is searched in the stiffness form alone,
+    # a deposited bed's in both forms (catalogue.LAYER_FORMS)
+    lay = searched["soil_layering"]
+    assert lay.form == "stiffness" and not lay.forms and lay.n_levels == len(lay.values)
+    assert lay.fixed["physics.soil_layering.compacted"] is False
+    dep, _, _ = _search_setup(sc.load(gd.scenario_path(), base), False, "auto", cmap,
+                              tmp_path / "c")
+    assert [f for f, _ in dep["soil_layering"].forms] == ["stiffness", "compacted"]
     assert search_tier(s_big)["soil.packing_file"] == ""
     searched, sim, how = _search_setup(s_big, False, "auto", cmap, tmp_path / "b")
     assert sim is not None and "coarse resolution" in how and "deposited beds" in how

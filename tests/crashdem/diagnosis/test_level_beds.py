@@ -137,8 +137,8 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
 
     deposited = [n for n, fs in DROP.full_search.items() if fs.deposits]
     assert sorted(deposited) == ["boundary_proximity", "soil_layering"]
-    n_dep = sum(len(DROP.full_search[n].values) for n in deposited)
-    n_all = sum(len(fs.values) for fs in DROP.full_search.values())
+    n_dep = sum(DROP.full_search[n].n_levels for n in deposited)
+    n_all = sum(fs.n_levels for fs in DROP.full_search.values())
     for beds in (1, 3):
         calls: list = []
         rep = screen_then_confirm(simulate(RomParams()), case.recording,

@@ -118,7 +118,7 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=(),
 
 def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     """With the full-model search, the full model also runs each searched effect at each of its
-    levels (``catalogue.DROP_FULL_SEARCH``: 24) and at most one refinement; every level is
+    levels (``catalogue.DROP_FULL_SEARCH``: 24, 30 runs with the layering in both its forms) and at most one refinement; every level is
     reported with its score and Delta BIC (report.json) and each effect's best level in
     report.md, each effect is judged by its best run, and the concealed layering is named (its
     interface 0.15-0.5 m levels bracket the truth)."""
@@ -128,8 +128,8 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     full = _scenario_rom_simulator(calls)
     top_k = 2
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
-    n_levels = sum(len(fs.values) for fs in DROP.full_search.values())
-    assert n_levels == 24
+    n_levels = sum(fs.n_levels for fs in DROP.full_search.values())
+    assert n_levels == 30
     # the numerics check runs the named effect's levels twice when a search level stands for it
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * len(DROP.full_search["soil_layering"].values)
@@ -222,8 +222,8 @@ def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering
     from crashdem.diagnosis.catalogue import DROP
 
     n_layering = len(DROP.full_search["soil_layering"].values)
-    n_levels = sum(len(fs.values) for fs in DROP.full_search.values())
-    assert n_levels == 24
+    n_levels = sum(fs.n_levels for fs in DROP.full_search.values())
+    assert n_levels == 30
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * (1 + n_layering) if rep.fit["full_search"].get("named") else 0)
     n_ext = sum(lv.get("beds", 1) for lv in rep.fit["full_search"]["levels"] if lv["extension"])
@@ -1509,3 +1509,60 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn(monkeypatc
     assert why("particle_rotation", [0.2, 0.2], 0.2) is not None
     c.rep.missing_physics = "particle_rotation"
     assert why("particle_rotation", [0.2, 0.2], 0.2) is None
+
+
+def _form_simulator(calls: list):
+    """``_scenario_rom_simulator`` in which the two forms of a layer differ: a compacted lower
+    layer (``physics.soil_layering.compacted = true``, denser as well as stiffer) resists as a
+    stiffness-only layer of 1.8 x its modulus factor does (within the ROM's strength ratio)."""
+    inner = _scenario_rom_simulator(calls)
+
+    def full(overrides):
+        ov = dict(overrides)
+        if ov.pop("physics.soil_layering.compacted", True) and ov.get(
+                "physics.soil_layering.enabled"):
+            ov["physics.soil_layering.lower_young_factor"] = 1.8 * float(
+                ov.get("physics.soil_layering.lower_young_factor", 3.0))
+        return inner(ov)
+
+    return full
+
+
+@pytest.mark.parametrize("form", ["stiffness", "compacted"])
+def test_the_layer_form_that_made_the_recording_is_the_one_kept(form):
+    """A layer at 0.3 m made in one form (``catalogue.LAYER_FORMS``) is searched in both; the
+    form that made it fits best and is kept (``fit.full_search.forms``), the level runs of the
+    other are reported (``form_kept`` false) and counted, the named depth is that form's and
+    the scenario fix carries the form's key. Fails when the forms are pooled together, when the
+    first form is always kept, or when the dropped form's runs go uncounted."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    truth = {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": 0.3,
+             "physics.soil_layering.lower_young_factor": 5.0,
+             "physics.soil_layering.compacted": form == "compacted"}
+    calls: list = []
+    sim = _form_simulator(calls)
+    p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
+        {k: v for k, v in truth.items() if k != "physics.soil_layering.compacted"}
+        | ({"physics.soil_layering.lower_young_factor": 9.0} if form == "compacted" else {})))
+    rec = acquire(p, np.random.default_rng(7))
+    rep = screen_then_confirm(simulate(RomParams()), rec, sim, top_k=2, numerics=())
+    fs_info = rep.fit["full_search"]
+    assert fs_info["forms"]["soil_layering"]["chosen"] == form, fs_info["forms"]
+    other = "compacted" if form == "stiffness" else "stiffness"
+    got = fs_info["forms"]["soil_layering"]["forms"]
+    assert got[form]["delta_bic_vs_reference"] > got[other]["delta_bic_vs_reference"]
+    lay = [lv for lv in fs_info["levels"] if lv["hypothesis"] == "soil_layering"
+           and not lv["refined"] and not lv["extension"]]
+    n = len(DROP.full_search["soil_layering"].values)
+    assert sorted(lv["form"] for lv in lay) == sorted([form] * n + [other] * n)
+    assert all(lv["form_kept"] == (lv["form"] == form) for lv in lay)
+    assert all(not lv["located"] for lv in lay if lv["form"] == other)
+    assert rep.simulations["full_simulations"] == len(calls)
+    assert rep.missing_physics == "soil_layering", rep.decision
+    h = next(h for h in rep.hypotheses if h["name"] == "soil_layering")
+    assert h["full_model"]["form"] == form
+    assert h["scenario_overrides"]["physics.soil_layering.compacted"] == (form == "compacted")
+    assert abs(h["parameters"]["interface_depth"] / 0.3 - 1.0) < 0.15, h["parameters"]
