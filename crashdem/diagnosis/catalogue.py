@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field, replace
-from typing import Any, Callable
+from typing import Any, Callable, Mapping
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH", "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "Catalogue", "DROP", "planar_catalogue",
@@ -435,6 +435,16 @@ class FullSearch:
             raise ValueError(f"FullSearch.{self.parameter}.forms: no form {name!r}; allowed: "
                              f"{list(forms)}")
         return replace(self, fixed={**self.fixed, **forms[name]}, forms=(), form=name)
+
+    def form_of(self, overrides: Mapping[str, Any]) -> str | None:
+        """The form whose overrides -- ``fixed`` with the form's own on top -- ``overrides``
+        all hold (the first such form), else ``form`` (the kept form, or None for a search of
+        one form). A form that only adds keys to another's is told from it by the values its
+        keys take in ``fixed``."""
+        for n, f in self.forms:
+            if all(k in overrides and overrides[k] == v for k, v in {**self.fixed, **f}.items()):
+                return n
+        return self.form
 
     def variants(self) -> list[FullSearch]:
         """One search per form (``with_form``), or this search when it has one form."""

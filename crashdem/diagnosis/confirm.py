@@ -373,16 +373,10 @@ class _Confirmation:
         return r
 
     def form_of(self, name: str, ov: Mapping[str, Any]) -> str | None:
-        """The form (``FullSearch.forms``) of a level run of effect ``name`` with the overrides
-        ``ov``: the first form whose overrides ``ov`` holds, the chosen form once ``choose_forms``
-        has kept one, None for an effect of one form."""
+        """The form of a level run of effect ``name`` with the overrides ``ov``
+        (``FullSearch.form_of``); None for an effect that is not searched."""
         fs = self.searched.get(name)
-        if fs is None:
-            return None
-        for n, f in fs.forms:
-            if all(k in ov and ov[k] == v for k, v in f.items()):
-                return n
-        return fs.form
+        return None if fs is None else fs.form_of(ov)
 
     def choose_forms(self, rows: list[Row]) -> list[Row]:
         """``rows`` with the level runs of every form but the best of each effect with

@@ -1566,3 +1566,31 @@ def test_the_layer_form_that_made_the_recording_is_the_one_kept(form):
     assert h["full_model"]["form"] == form
     assert h["scenario_overrides"]["physics.soil_layering.compacted"] == (form == "compacted")
     assert abs(h["parameters"]["interface_depth"] / 0.3 - 1.0) < 0.15, h["parameters"]
+
+
+def test_each_form_reads_back_as_itself():
+    """``FullSearch.form_of`` on the overrides of each variant's levels gives that variant's
+    form, also for a form that only adds a key to another's (its value in ``fixed`` tells them
+    apart; matching a form by its own keys alone read the second form's runs as the first's);
+    a kept form reads as itself, a search of one form as None; too few forms, or two of one
+    name, are refused naming the field."""
+    from crashdem.diagnosis.catalogue import FullSearch
+
+    lay = "physics.soil_layering."
+    fs = FullSearch("interface_depth", "m", (lay + "depth",), (0.2, 0.3),
+                    {lay + "enabled": True, lay + "lower_young_factor": 5.0},
+                    forms=(("stiffness", {lay + "compacted": False}),
+                           ("compacted", {lay + "compacted": True}),
+                           ("stiffness_x10", {lay + "compacted": False,
+                                              lay + "lower_young_factor": 10.0})))
+    assert fs.n_levels == 6
+    for v in fs.variants():
+        for x in v.values:
+            assert fs.form_of({**v.overrides(x), "scenario.seed": 2}) == v.form
+    assert fs.with_form("stiffness_x10").form_of({}) == "stiffness_x10"
+    assert FullSearch("restitution", "1", ("k",), (0.1, 0.2)).form_of({"k": 0.1}) is None
+    with pytest.raises(ValueError, match="forms: no form 'none'"):
+        fs.with_form("none")
+    for bad in ((("a", {}),), (("a", {}), ("a", {"k": 1}))):
+        with pytest.raises(ValueError, match="FullSearch.interface_depth.forms"):
+            replace(fs, forms=bad)
