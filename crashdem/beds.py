@@ -141,36 +141,59 @@ SURFACE_MIN_GRAINS = 10
 SURFACE_WALL_CLEARANCE = 3.0
 
 
-def free_surface(scen: Scenario, x: np.ndarray, r: np.ndarray) -> float:
-    """Height [m] of an imported bed's free surface (``soil.packing.free_surface_height``): the
-    level at which the solid fraction of horizontal sections through the container's central
-    footprint -- its cross-section with ``SURFACE_WALL_CLEARANCE`` mean radii kept clear of
-    the walls -- falls for the last time to half of the bed's own. For a bed cut where the
-    grain centres pass a height, as crashdem deposits its layers, this is that height to within
-    a fraction of a radius: a layer depth then means the same on an imported bed as on a
-    deposited one (below the free surface), whatever grain happens to stand highest.
-    ``ScenarioError`` naming ``physics.soil_layering.depth`` when fewer than
-    ``SURFACE_MIN_GRAINS`` grains lie in the footprint."""
+def footprint_surface(x: np.ndarray, r: np.ndarray, *, radius: float | None = None,
+                      half_length: float | None = None, half_width: float | None = None
+                      ) -> tuple[float | None, int]:
+    """Height [m] of a bed's free surface over a container's central footprint, and the number
+    of grain centres in that footprint. The container is a cylinder of ``radius`` about the z
+    axis, or a box of ``half_length`` x ``half_width`` about it; its footprint is the
+    cross-section with ``SURFACE_WALL_CLEARANCE`` mean radii kept clear of the walls. The
+    surface is ``soil.packing.free_surface_height`` of the grains there: the level at which the
+    solid fraction of horizontal sections falls for the last time to half of the bed's own. None
+    (with the count) when fewer than ``SURFACE_MIN_GRAINS`` grains lie in the footprint. The
+    one definition of a bed's surface for an imported bed (``free_surface``) and for the Yade
+    validation's realised depths (``validation/diagnosis_yade/cases.bed_surface``)."""
     from soil.packing import free_surface_height
 
+    x = np.asarray(x, float)
+    r = np.asarray(r, float)
     clear = SURFACE_WALL_CLEARANCE * float(np.mean(r))
-    if scen["container.shape"] == "cylinder":
-        within = 0.5 * scen["container.diameter"] - clear
+    if radius is not None:
+        within = float(radius) - clear
         inside = np.hypot(x[:, 0], x[:, 1]) < within
         area = math.pi * max(within, 0.0) ** 2
-    else:
-        hx = 0.5 * scen["container.length"] - clear
-        hy = 0.5 * scen["container.width"] - clear
+    elif half_length is not None and half_width is not None:
+        hx, hy = float(half_length) - clear, float(half_width) - clear
         inside = (np.abs(x[:, 0]) < hx) & (np.abs(x[:, 1]) < hy)
         area = 4.0 * max(hx, 0.0) * max(hy, 0.0)
+    else:
+        raise ValueError("footprint_surface: give radius, or half_length and half_width")
     n = int(np.count_nonzero(inside))
     if n < SURFACE_MIN_GRAINS or area <= 0.0:
+        return None, n
+    return float(free_surface_height(x[inside, 2], r[inside], area)), n
+
+
+def free_surface(scen: Scenario, x: np.ndarray, r: np.ndarray) -> float:
+    """Height [m] of an imported bed's free surface over the container's central footprint
+    (``footprint_surface``). For a bed cut where the grain centres pass a height, as crashdem
+    deposits its layers, this is that height to within a fraction of a radius: a layer depth
+    then means the same on an imported bed as on a deposited one (below the free surface),
+    whatever grain happens to stand highest. ``ScenarioError`` naming
+    ``physics.soil_layering.depth`` when fewer than ``SURFACE_MIN_GRAINS`` grains lie in the
+    footprint."""
+    if scen["container.shape"] == "cylinder":
+        z, n = footprint_surface(x, r, radius=0.5 * scen["container.diameter"])
+    else:
+        z, n = footprint_surface(x, r, half_length=0.5 * scen["container.length"],
+                                 half_width=0.5 * scen["container.width"])
+    if z is None:
         raise ScenarioError(
             f"physics.soil_layering.depth={scen['physics.soil_layering.depth']!r}: the depth is "
             f"counted from the imported bed's free surface, located in the container's central "
             f"footprint ({SURFACE_WALL_CLEARANCE:g} mean radii clear of the walls), which holds "
             f"{n} grains of {str(scen[FIELD])!r}; needs at least {SURFACE_MIN_GRAINS}")
-    return float(free_surface_height(x[inside, 2], r[inside], area))
+    return z
 
 
 def check_scenario(scen: Scenario) -> None:

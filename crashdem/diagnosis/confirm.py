@@ -41,7 +41,7 @@ from crashdem.diagnosis.mismatch import align, onset_time
 from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
-           "REPLICATE", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
+           "REPLICATE", "STIFFER", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
            "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS", "SEARCH_TIER_LEVEL_BEDS"]
 
 #: a full simulation must raise the overall score over the baseline by this much to confirm
@@ -58,6 +58,9 @@ AMBIGUITY_MARGIN = 2.0
 #: full-model search on a separate (cheaper) simulator: this many leading effects that beat
 #: its baseline decisively are run with the full simulator
 SEARCH_PROMOTE = 2
+#: name of the whole-bed stiffness runs (``catalogue.stiffer_soil_overrides``): like the
+#: replicates they stand for no new physics, and an effect has to fit better than they do
+STIFFER = "stiffer_soil"
 #: name of the replicate-realisation runs (the baseline with another packing seed) in the
 #: confirmation table: they stand for no physics, only for the scatter of the realisation
 REPLICATE = "replicate"
@@ -318,6 +321,8 @@ class _Confirmation:
         # the level runs of the forms not kept (``choose_forms``) and each effect's choice
         self.form_rows: list[Row] = []
         self.forms_chosen: dict[str, dict[str, Any]] = {}
+        # the whole-bed stiffness runs of the full tier (``stiffer_requests``), pooled per factor
+        self.stiff_rows: list[Row] = []
 
     def _candidates(self) -> list[dict[str, Any]]:
         """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
@@ -426,6 +431,17 @@ class _Confirmation:
                                             and r["form"] != chosen)]
             self.searched[name] = fs.with_form(chosen)
         return keep
+
+    def stiffer_requests(self) -> list[Request]:
+        """Requests of the whole bed made stiffer by each of ``catalogue.STIFFER_SOIL_FACTORS``
+        on each bed of a deposited level (``catalogue.stiffer_soil_overrides``), when the
+        layering is searched with its stiffness form; else none."""
+        out: list[Request] = []
+        for f in catalogue.STIFFER_SOIL_FACTORS:
+            ov = catalogue.stiffer_soil_overrides(self.searched.get("soil_layering"), f)
+            if ov is not None:
+                out += [(STIFFER, {**ov, **rv, **self.cfc_key}, float(f)) for rv in self.beds]
+        return out
 
     def run(self, sim: Simulator, requests: list[Request]) -> list[Row]:
         """Scored rows of ``requests`` run on ``sim`` (one batch when it has ``map``)."""
@@ -742,7 +758,11 @@ class _Confirmation:
             requests += tier.promoted
         else:
             requests += self.levels(list(self.searched)) + self.replicate_requests()
-        rows = self.run(sim, requests)
+        # a stiffer soil is a recalibration: on the full tier the whole bed made stiffer runs
+        # beside the replicates, and an effect has to beat it too (the realisation floor)
+        stiff = self.stiffer_requests() if tier is None and self.replicates else []
+        rows = self.run(sim, requests + stiff)
+        stiff_rows, rows = rows[len(requests):], rows[:len(requests)]
         if tier is None and len(self.beds) > 1:
             # bed 0's base: the baseline simulation aligned as every run is (as the screening
             # aligned it when its raw channels are not at hand)
@@ -751,6 +771,8 @@ class _Confirmation:
                   {"hypothesis": "baseline", "aligned": rep.baseline})
             self.set_beds(b0, rows, b0["aligned"])
             rows = [rows[0]] + self.pooled(rows[1:])
+            n = len(self.beds)
+            stiff_rows = [self._pool(stiff_rows[i:i + n]) for i in range(0, len(stiff_rows), n)]
         recal_row = rows[0]
         # reference: the better of the baseline simulation and the recalibrated full run
         base_row: Row = {"hypothesis": "baseline", "score": float(rep.fit["before"]["overall"]),
@@ -779,8 +801,13 @@ class _Confirmation:
                 qualify(r)
             rows += extra
         # the realisation floor: the best replicate of the baseline among the full runs (none
-        # there, e.g. when they ran on the search simulator: the reference)
-        return _FullTier(rows, ref_row["score"], _realisation_floor(rows, ref_row["score"]))
+        # there, e.g. when they ran on the search simulator: the reference), raised to the best
+        # whole-bed stiffness run
+        for r in stiff_rows:
+            qualify(r)
+        self.stiff_rows = stiff_rows
+        return _FullTier(rows, ref_row["score"],
+                         _realisation_floor(rows, ref_row["score"], stiff_rows))
 
     def decide(self, full: _FullTier, tier: _SearchTier | None = None) -> _Decision:
         """The screening's claim stands unless its full run is decisively worse than the
@@ -966,6 +993,13 @@ class _Confirmation:
                          if r["hypothesis"] == REPLICATE],
                 "floor_delta_bic": f["delta_bic"], "floor_score": f["score"],
                 "scatter_delta_bic": f["scatter"]}
+            if self.stiff_rows:
+                rep.fit["realisation"]["stiffer_soil"] = [
+                    {"young_factor": r["search_value"],
+                     "score": r["score"] if math.isfinite(r["score"]) else None,
+                     "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
+                     "runs": _n_runs([r]), **({"error": r["error"]} if "error" in r else {})}
+                    for r in self.stiff_rows]
         det = _detectability(rep, tier.rows if tier is not None else rows, searched)
         if det is not None:
             rep.fit["detectability"] = det
@@ -1009,7 +1043,7 @@ class _Confirmation:
             rep.fit["after_full"] = {"hypothesis": d.confirmed, "overall": d.best["score"],
                                      "per_channel": d.best["per_channel"]}
             rep.refitted = dict(d.best["aligned"])
-        rep.simulations["full_simulations"] = _n_runs(rows) + (
+        rep.simulations["full_simulations"] = _n_runs(rows) + _n_runs(self.stiff_rows) + (
             _n_runs(self.form_rows) if tier is None else 0)
         rep.simulations["full_wall_time_s"] = t_full
         rep.missing_physics = d.confirmed
@@ -1255,8 +1289,11 @@ class _Confirmation:
               f"{searched[confirmed].unit}" if confirmed and "search_value" in best else "")
         if self.replicates:
             rf = self.rep.fit["realisation"]
-            how += (f"; realisation floor of {len(self.replicates)} replicate packings on the "
-                    f"{rf['tier']}: Delta BIC {rf['floor_delta_bic']:.1f}, score "
+            stiff = (" and the whole bed " + " / ".join(f"x{r['young_factor']:g}"
+                                                         for r in rf["stiffer_soil"])
+                     + " stiffer" if rf.get("stiffer_soil") else "")
+            how += (f"; realisation floor of {len(self.replicates)} replicate packings{stiff} "
+                    f"on the {rf['tier']}: Delta BIC {rf['floor_delta_bic']:.1f}, score "
                     f"{rf['floor_score']:.3f}")
         return (f"full-simulation confirmation ({how}, reference score {full.reference:.3f}): "
                 + (f"{d.ambiguous[0]} would be named, but {d.ambiguous[1]} fits the recording "
@@ -1369,15 +1406,18 @@ def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
     return _contends(r, floor, CONFIRM_MIN_GAIN)
 
 
-def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float) -> dict[str, float]:
+def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float,
+                       stiffer: Iterable[dict[str, Any]] = ()) -> dict[str, float]:
     """The best Delta BIC (``delta_bic``, at least 0: the reference) and the best score
-    (``score``, at least the reference's) of the scored replicate runs among ``rows``, and the
-    sample standard deviation of their Delta BIC (``scatter``; 0 with fewer than two)."""
+    (``score``, at least the reference's) of the scored replicate runs among ``rows`` and the
+    scored whole-bed stiffness runs ``stiffer``, and the sample standard deviation of the
+    replicates' Delta BIC alone (``scatter``; 0 with fewer than two)."""
     reps = [r for r in rows if r["hypothesis"] == REPLICATE and "delta_bic_vs_reference" in r
             and math.isfinite(r["score"])]
+    alt = [r for r in stiffer if "delta_bic_vs_reference" in r and math.isfinite(r["score"])]
     db = [float(r["delta_bic_vs_reference"]) for r in reps]
-    return {"delta_bic": max([0.0] + db),
-            "score": max([float(reference_score)] + [float(r["score"]) for r in reps]),
+    return {"delta_bic": max([0.0] + db + [float(r["delta_bic_vs_reference"]) for r in alt]),
+            "score": max([float(reference_score)] + [float(r["score"]) for r in reps + alt]),
             "scatter": float(np.std(db, ddof=1)) if len(db) > 1 else 0.0}
 
 

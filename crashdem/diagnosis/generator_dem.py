@@ -180,10 +180,16 @@ def draw_dem_effect(effect: str, rng: np.random.Generator) -> dict[str, Any]:
     return out
 
 
-#: sources whose change invalidates cached runs (the DEM, the body, the coupling, the run)
+#: sources whose change invalidates cached runs (the DEM, the body, the coupling, the run and
+#: the modules of crashdem it builds a run from; ``beds`` places an imported bed and its layer)
 _ROOT = Path(__file__).resolve().parents[2]
 _CODE = ("soil", "bodies", "coupling", "crashdem/run.py", "crashdem/sensors.py",
-         "crashdem/scenario.py", "crashdem/filters.py")
+         "crashdem/scenario.py", "crashdem/filters.py", "crashdem/beds.py", "crashdem/signal.py",
+         "crashdem/glider.py")
+#: modules of crashdem that the keyed ones import but that do not shape a run's signals: they
+#: write, checkpoint, plot, export and report it, or check a channel's ISO code (``tests``: every
+#: other module they import is in ``_CODE``)
+_OUTPUT_ONLY = ("checkpoint", "progress", "results", "plotting", "export", "isomme")
 
 
 @functools.lru_cache(maxsize=1)

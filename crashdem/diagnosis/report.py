@@ -249,6 +249,15 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
             db = r.get("delta_bic_vs_reference")
             lines.append(f"| {ov or '-'} | {_fmt(r.get('score'))} | "
                          f"{'-' if db is None else f'{db:.1f}'} |")
+        if real.get("stiffer_soil"):
+            lines += ["", ("A stiffer soil is a recalibration, not missing physics: the floor "
+                           "also holds the baseline's beds with every grain's modulus multiplied "
+                           "(the change averaged over the beds)."), "",
+                      "| whole bed | score | Delta BIC vs reference |", "|---|---|---|"]
+            for r in real["stiffer_soil"]:
+                db = r.get("delta_bic_vs_reference")
+                lines.append(f"| E x{r['young_factor']:g} | {_fmt(r.get('score'))} | "
+                             f"{'-' if db is None else f'{db:.1f}'} |")
     det = fit.get("detectability")
     if det and det.get("effects"):
         lines += ["", f"Detectability: how far each search level moves the baseline simulation "

@@ -17,7 +17,11 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from crashdem.beds import SURFACE_WALL_CLEARANCE
 from validation.diagnosis_yade import cases  # noqa: E402
+
+#: the Yade truth's tank radius [m] (the 2 m tank)
+TANK = 1.0
 
 
 class _Handed(Exception):
@@ -220,21 +224,39 @@ def test_bed_surface_of_a_cubic_lattice(r, layers):
     r^2) = pi / 6; half of that is reached d = r sqrt(2/3) above the top layer's centres."""
     x, rad = _cubic_bed(r, layers)
     top = r + 2.0 * r * (layers - 1)
-    assert cases.bed_surface(x, rad) == pytest.approx(top + r * np.sqrt(2.0 / 3.0), abs=0.02 * r)
-    # a grain layer more raises the surface by the spacing; the grains outside the central
-    # cylinder (a wall ring) do not count
+    assert cases.bed_surface(x, rad, TANK) == pytest.approx(top + r * np.sqrt(2.0 / 3.0),
+                                                            abs=0.02 * r)
+    # a grain layer more raises the surface by the spacing; the grains outside the footprint
+    # (a wall ring 3 mean radii wide) do not count
     x2, rad2 = _cubic_bed(r, layers + 1)
-    assert cases.bed_surface(x2, rad2) - cases.bed_surface(x, rad) == pytest.approx(2 * r, abs=1e-9)
-    ring = np.hypot(x2[:, 0], x2[:, 1]) > cases.SURFACE_REGION_RADIUS
+    assert (cases.bed_surface(x2, rad2, TANK) - cases.bed_surface(x, rad, TANK)
+            == pytest.approx(2 * r, abs=1e-9))
+    ring = np.hypot(x2[:, 0], x2[:, 1]) > TANK - SURFACE_WALL_CLEARANCE * r
     keep = ~ring | (x2[:, 2] < top + r)
-    assert cases.bed_surface(x2[keep], rad2[keep]) == pytest.approx(cases.bed_surface(x2, rad2))
+    assert cases.bed_surface(x2[keep], rad2[keep], TANK) == pytest.approx(
+        cases.bed_surface(x2, rad2, TANK))
+
+
+def test_bed_surface_is_the_imported_beds_surface():
+    """One definition of a bed's surface: the Yade validation's is the one an imported bed's
+    layer depth counts from (``crashdem.beds.free_surface``), for the same tank."""
+    from crashdem.beds import free_surface
+    from crashdem.scenario import load
+
+    x, rad = _cubic_bed(0.05, 9)
+    rng = np.random.default_rng(3)
+    x = x + rng.normal(0.0, 0.005, x.shape)
+    scen = load(ROOT / "validation/scenarios/drop_s2_h13p70.toml",
+                {"container.diameter": 2 * TANK})
+    assert cases.bed_surface(x, rad, TANK) == free_surface(scen, x, rad)
 
 
 def test_bed_surface_needs_grains_under_the_footprint():
     x, rad = _cubic_bed(0.05, 3)
     far = x + np.array([5.0, 0.0, 0.0])
-    with pytest.raises(ValueError, match="within 0.7 m of the axis"):
-        cases.bed_surface(far, rad)
+    with pytest.raises(ValueError, match="0 grains in the central footprint of a tank of "
+                                         "radius 1 m; need at least 10"):
+        cases.bed_surface(far, rad, TANK)
 
 
 def test_realised_depths_are_measured_on_the_yade_bed(tmp_path):
@@ -245,13 +267,14 @@ def test_realised_depths_are_measured_on_the_yade_bed(tmp_path):
     x, rad = _cubic_bed(r, layers)
     f = tmp_path / "packing.npz"
     np.savez(f, x=x, radius=rad)
-    surface = cases.bed_surface(x, rad)
+    surface = cases.bed_surface(x, rad, TANK)
     top = float(np.max(x[:, 2] + rad))
-    assert cases.realised_depths({"bed_depth": top + 0.02}, f, top) == {"floor_depth": surface}
-    got = cases.realised_depths({"layer_depth": 0.3, "layer_young_factor": 5.0}, f, top)
+    assert cases.realised_depths({"bed_depth": top + 0.02}, f, top, TANK) == {
+        "floor_depth": surface}
+    got = cases.realised_depths({"layer_depth": 0.3, "layer_young_factor": 5.0}, f, top, TANK)
     assert got == {"interface_depth": pytest.approx(surface - (top - 0.3))}
     assert got["interface_depth"] < 0.3  # the highest grain top lies above the surface
-    assert cases.realised_depths({"cohesion": 2e5}, f, top) == {}
+    assert cases.realised_depths({"cohesion": 2e5}, f, top, TANK) == {}
 
 
 def test_the_truth_radius_scales_only_the_grains(monkeypatch, tmp_path):

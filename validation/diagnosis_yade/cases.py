@@ -80,9 +80,6 @@ FIXED_LIMITS: dict[str, tuple[float, float, str]] = {
 COMPARED = {"layer_depth": "interface_depth", "bed_depth": "floor_depth",
             "speed_offset": "speed_offset", "natural_frequency": "mount_frequency",
             "restitution": "restitution"}
-#: radius [m] of the central cylinder of the 1 m tank whose sections locate a bed's free
-#: surface (``bed_surface``): the 0.45 m sphere's footprint and a grain ring, clear of the wall
-SURFACE_REGION_RADIUS = 0.7
 RADIUS_CHANGE = (0.10, 0.15)
 #: mean grain radius [m] about which a case draws its own (``RADIUS_CHANGE``): 0.10 m, the
 #: small bed's; ``use_truth_radius`` (``diagnose_yade.py --truth-radius``) sets another, e.g.
@@ -94,12 +91,10 @@ TRUTH_RADIUS_LIMITS = (0.03, 0.2)
 DT_FACTOR = (0.2, 0.4)
 
 
-def bed_surface(x: np.ndarray, radius: np.ndarray,
-                within: float = SURFACE_REGION_RADIUS) -> float:
-    """Height [m] of a deposited bed's free surface above its floor (z = 0): the level at which
-    the solid fraction of horizontal sections through the central cylinder (radius ``within``;
-    grains whose centre lies in it) falls for the last time to half of the bed's own, the
-    bed's being its mean from 5 to 2 mean radii below the highest centre.
+def bed_surface(x: np.ndarray, radius: np.ndarray, tank_radius: float) -> float:
+    """Height [m] of a deposited bed's free surface above its floor (z = 0) in a cylindrical
+    tank of ``tank_radius``: ``crashdem.beds.footprint_surface``, the definition an imported
+    bed's layer depth counts from (the tank's cross-section, 3 mean radii clear of its wall).
 
     This is the soil thickness a floor depth means whatever code made the bed. crashdem cuts a
     deposited layer where the grain *centres* pass its top, and this level then lies within
@@ -107,20 +102,20 @@ def bed_surface(x: np.ndarray, radius: np.ndarray,
     grains: -0.034 to +0.024 m, mean -0.005 m), so crashdem's ``floor_depth`` is a thickness of
     this kind. The Yade truth removes the grains whose *top* passes the drawn bed depth, so its
     surface lies about a grain radius lower than drawn (measured: beds drawn at 0.764 / 0.825 /
-    2.0 m with 0.114 / 0.088 m grains have their surface at 0.637 / 0.732 / 1.909-1.912 m)."""
-    from soil.packing import free_surface_height
+    2.0 m with 0.114 / 0.088 m grains have their surface at 0.637 / 0.732 / 1.909-1.912 m).
+    ``ValueError`` with fewer than ``crashdem.beds.SURFACE_MIN_GRAINS`` grains in the
+    footprint."""
+    from crashdem.beds import SURFACE_MIN_GRAINS, footprint_surface
 
-    x = np.asarray(x, float)
-    r = np.asarray(radius, float)
-    inside = np.hypot(x[:, 0], x[:, 1]) < within
-    if inside.sum() < 10:
-        raise ValueError(f"bed_surface: {int(inside.sum())} grains within {within:g} m of the "
-                         f"axis; need at least 10")
-    return free_surface_height(x[inside, 2], r[inside], math.pi * within ** 2)
+    z, n = footprint_surface(x, radius, radius=tank_radius)
+    if z is None:
+        raise ValueError(f"bed_surface: {n} grains in the central footprint of a tank of radius "
+                         f"{tank_radius:g} m; need at least {SURFACE_MIN_GRAINS}")
+    return z
 
 
 def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,
-                    surface_top: float) -> dict[str, float]:
+                    surface_top: float, tank_radius: float) -> dict[str, float]:
     """The drawn floor and interface depths of a Yade case as its bed realises them, in the
     ROM's names: ``floor_depth`` the bed's surface height (``bed_surface``; the floor wall is at
     z = 0), ``interface_depth`` that surface's height above the level below which the grains
@@ -129,7 +124,7 @@ def realised_depths(drawn: Mapping[str, Any], packing_npz: str | Path,
     if "bed_depth" not in drawn and "layer_depth" not in drawn:
         return {}
     z = np.load(packing_npz)
-    surface = bed_surface(z["x"], z["radius"])
+    surface = bed_surface(z["x"], z["radius"], tank_radius)
     out: dict[str, float] = {}
     if "bed_depth" in drawn:
         out["floor_depth"] = surface
@@ -384,7 +379,7 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         if not declare_cfc:
             rec = {k: Signal(v.name, v.t, v.data, v.unit, None, v.meta) for k, v in rec.items()}
     values = drawn_values(drawn)
-    realised = realised_depths(drawn, info["packing_npz"], info["surface_z"])
+    realised = realised_depths(drawn, info["packing_npz"], info["surface_z"], cfg["tank_radius"])
     values.update(realised)
     return YadeCase(effect, values, seed, rec, drawn, dem_baseline(cache),
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,

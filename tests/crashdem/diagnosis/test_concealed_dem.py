@@ -36,7 +36,7 @@ import pytest
 
 from crashdem.diagnosis import CONFIRM_MIN_GAIN, fit, screen_then_confirm
 from crashdem.signal import Signal
-from crashdem.diagnosis.catalogue import DROP
+from crashdem.diagnosis.catalogue import DROP, STIFFER_SOIL_FACTORS
 from crashdem.diagnosis.confirm import LEVEL_BEDS
 from crashdem.diagnosis.generator import ACCEPT_PARAM_RTOL as PARAM_RTOL
 from crashdem.diagnosis.generator import ACCEPT_SCORE_AFTER as MIN_SCORE_AFTER
@@ -207,6 +207,8 @@ N_SEARCH_RUNS = sum(fs.n_levels * (N_BEDS if fs.deposits else 1)
 #: runs of the extension levels beyond a strong end (``FullSearch.extension``), when all run
 N_EXTENSION_RUNS = sum(len(fs.extension) * (N_BEDS if fs.deposits else 1)
                        for fs in DROP.full_search.values())
+#: runs of the whole bed made stiffer (the realisation floor's recalibration), on each bed
+N_STIFFER_RUNS = len(STIFFER_SOIL_FACTORS) * N_BEDS
 
 
 def test_dem_diagnosis_cost(dem_runs):
@@ -221,7 +223,10 @@ def test_dem_diagnosis_cost(dem_runs):
     for c, r, _, _ in dem_runs:
         n = r.simulations["full_simulations"]
         assert 1 <= n <= (1 + TOP_K + N_SEARCH_RUNS + N_EXTENSION_RUNS + N_BEDS
-                          + N_REPLICATES), (c.effect, c.seed, n)
+                          + N_REPLICATES + N_STIFFER_RUNS), (c.effect, c.seed, n)
+        if "full_search" in r.fit:
+            stiff = r.fit["realisation"]["stiffer_soil"]
+            assert sum(s["runs"] for s in stiff) == N_STIFFER_RUNS
         if "full_search" in r.fit:
             assert r.fit["full_search"]["runs"] >= N_SEARCH_RUNS
             assert r.fit["full_search"]["level_beds"] == N_BEDS
@@ -402,8 +407,9 @@ def test_full_dem_confirmation_of_layering(dem_runs):
     c, r = next((c, r) for c, r, _, _ in dem_runs if c.effect == "soil_layering" and c.seed == 11)
     assert r.hypotheses[0]["name"] == "soil_layering"
     assert r.missing_physics == "soil_layering", r.decision
-    assert 1 + TOP_K + N_SEARCH_RUNS + N_REPLICATES <= r.simulations["full_simulations"] \
-        <= 1 + TOP_K + N_SEARCH_RUNS + N_EXTENSION_RUNS + N_BEDS + N_REPLICATES
+    assert 1 + TOP_K + N_SEARCH_RUNS + N_REPLICATES + N_STIFFER_RUNS \
+        <= r.simulations["full_simulations"] \
+        <= 1 + TOP_K + N_SEARCH_RUNS + N_EXTENSION_RUNS + N_BEDS + N_REPLICATES + N_STIFFER_RUNS
     conf = {row["hypothesis"]: row for row in r.fit["confirmation"]}
     assert conf["soil_layering"]["delta_bic_vs_reference"] > fit.ACCEPT_MARGIN
     after = r.fit["after_full"]["overall"]
@@ -650,6 +656,42 @@ def test_use_scenario_switches_the_drop_height_and_the_cache_key():
     assert gd._key({"x": 1}) == key13
     with pytest.raises(ValueError, match="scenario="):
         gd.use_scenario(gd.SCENARIO.parent / "no_such_drop.toml")
+
+
+def test_the_run_cache_is_keyed_by_every_module_a_run_is_built_from():
+    """A cached DEM run is stale when any source that shapes its signals changes: every crashdem
+    module that ``crashdem.run`` or a keyed module imports is in the fingerprint
+    (``generator_dem._CODE``), bar the declared output-only ones. Measured before: the imported
+    bed's free surface (``crashdem.beds``) changed in session 27 with its runs' keys unchanged."""
+    import ast
+
+    from crashdem.diagnosis import generator_dem as gd
+
+    keyed = {c for c in gd._CODE if c.startswith("crashdem/")}
+    seen: set[str] = set()
+    todo = sorted(keyed)
+    while todo:
+        rel = todo.pop()
+        if rel in seen:
+            continue
+        seen.add(rel)
+        for node in ast.walk(ast.parse((gd._ROOT / rel).read_text())):
+            mods: list[str] = []
+            if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                if node.module == "crashdem":
+                    mods = [a.name for a in node.names]
+                elif node.module.startswith("crashdem."):
+                    mods = [node.module.split(".")[1]]
+            elif isinstance(node, ast.Import):
+                mods = [a.name.split(".")[1] for a in node.names
+                        if a.name.startswith("crashdem.")]
+            for m in mods:
+                if m in gd._OUTPUT_ONLY or m == "diagnosis":
+                    continue
+                path = f"crashdem/{m}.py"
+                assert path in keyed, f"{rel} imports crashdem.{m}, which is not in _CODE"
+                todo.append(path)
+    assert "crashdem/beds.py" in seen
 
 
 @pytest.mark.parametrize("seed, effect", [(12, "initial_conditions"), (21, None)])

@@ -133,6 +133,7 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
     of a deposited effect (floor, interface) runs once per bed with that bed's overrides, every
     other level once; the pooled rows report their beds and the simulation counts include them.
     With one bed per level nothing is run on another packing but the replicates."""
+    from crashdem.diagnosis import catalogue as cat
     from tests.crashdem.diagnosis.test_report_confirm import _scenario_rom_simulator
 
     deposited = [n for n, fs in DROP.full_search.items() if fs.deposits]
@@ -159,7 +160,13 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
             assert lv.get("beds", 1) == (beds if dep else 1)
         # beds 2..: each deposited level (and a deposited refinement) once more with each
         # replicate's seed, its other overrides those of bed 0
-        bed_runs = [c for c in seeded if c not in REPS]
+        # the whole bed made stiffer (the realisation floor's recalibration runs) on every bed
+        stiff_runs = [c for c in calls
+                      if c.get("physics.soil_layering.depth") == cat.WHOLE_BED_DEPTH]
+        assert len(stiff_runs) == len(cat.STIFFER_SOIL_FACTORS) * beds
+        assert sorted(c.get("scenario.seed", 0) for c in stiff_runs) == sorted(
+            [0, 2, 3][:beds] * len(cat.STIFFER_SOIL_FACTORS))
+        bed_runs = [c for c in seeded if c not in REPS and c not in stiff_runs]
         pooled = [lv for lv in levels if "beds" in lv]
         assert len(pooled) == (n_dep + n_dep_ext + sum(lv["refined"] for lv in pooled)
                                if beds > 1 else 0)

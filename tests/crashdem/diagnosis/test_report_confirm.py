@@ -1568,6 +1568,50 @@ def test_the_layer_form_that_made_the_recording_is_the_one_kept(form):
     assert abs(h["parameters"]["interface_depth"] / 0.3 - 1.0) < 0.15, h["parameters"]
 
 
+def test_a_stiffer_soil_is_not_named_a_layer():
+    """A recording of the whole bed made stiffer (every grain's modulus x5: a wrong soil value,
+    a recalibration) is not named ``soil_layering``, whose shallowest level (0.15 m, x5) comes
+    close to it: the full tier runs the whole bed x2 and x5 stiffer on the level beds
+    (``catalogue.stiffer_soil_overrides``) and an effect has to beat them as it beats the
+    replicates (``fit.realisation.stiffer_soil``, counted in the full runs). A layer at 0.3 m is
+    still named. Fails without the whole-bed runs (the layer at 0.15 m is named)."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.catalogue import DROP, WHOLE_BED_DEPTH, stiffer_soil_overrides
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    lay = DROP.full_search["soil_layering"]
+    ov = stiffer_soil_overrides(lay, 5.0)
+    assert ov["physics.soil_layering.depth"] == WHOLE_BED_DEPTH
+    assert ov["physics.soil_layering.compacted"] is False
+    assert ov["physics.soil_layering.lower_young_factor"] == 5.0
+    assert stiffer_soil_overrides(lay.with_form("compacted"), 5.0) is None
+    assert stiffer_soil_overrides(lay.with_form("stiffness"), 2.0)[
+        "physics.soil_layering.lower_young_factor"] == 2.0
+
+    def diagnose(depth):
+        calls: list = []
+        p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
+            {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": depth,
+             "physics.soil_layering.lower_young_factor": 5.0}))
+        rec = acquire(p, np.random.default_rng(7))
+        rep = screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
+                                  numerics=(), replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)],
+                                  level_beds=5)
+        assert rep.simulations["full_simulations"] == len(calls)
+        return rep
+
+    rep = diagnose(WHOLE_BED_DEPTH)
+    assert rep.missing_physics is None, rep.decision
+    stiff = rep.fit["realisation"]["stiffer_soil"]
+    assert [s["young_factor"] for s in stiff] == [2.0, 5.0]
+    assert all(s["runs"] == 5 for s in stiff)
+    assert rep.fit["realisation"]["floor_delta_bic"] == pytest.approx(
+        max(s["delta_bic_vs_reference"] for s in stiff))
+    assert "and the whole bed x2 / x5 stiffer" in rep.decision
+    rep = diagnose(0.3)
+    assert rep.missing_physics == "soil_layering", rep.decision
+
+
 def test_each_form_reads_back_as_itself():
     """``FullSearch.form_of`` on the overrides of each variant's levels gives that variant's
     form, also for a form that only adds a key to another's (its value in ``fixed`` tells them
