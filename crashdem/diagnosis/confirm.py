@@ -41,8 +41,8 @@ from crashdem.diagnosis.mismatch import align, onset_time
 from crashdem.signal import Signal
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
-           "REPLICATE", "STIFFER", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS", "replicate_overrides",
-           "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS", "SEARCH_TIER_LEVEL_BEDS"]
+           "REPLICATE", "STIFFER", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS",
+           "replicate_overrides", "NUMERICS_RADIUS_SCALES", "LEVEL_BEDS", "SEARCH_TIER_LEVEL_BEDS"]
 
 #: a full simulation must raise the overall score over the baseline by this much to confirm
 CONFIRM_MIN_GAIN = 0.02
@@ -462,18 +462,20 @@ class _Confirmation:
                 for q in self.level_requests(n, x)]
 
     def pooled(self, rows: list[Row]) -> list[Row]:
-        """``rows`` with the bed runs of each deposited level replaced by one row (at the place
-        of its first bed): the anchor (``bed_anchor``) plus the mean over the beds of the run's
-        change against the run of the same bed in ``bed_bases`` (the baseline's, the
-        replicates'). Beds whose run or base failed are left out of the mean; a level with no
-        bed left is an error row. Nothing changes with one bed per level."""
+        """``rows`` with the bed runs of each deposited level (and of each whole-bed stiffness
+        factor, ``stiffer_requests``) replaced by one row (at the place of its first bed): the
+        anchor (``bed_anchor``) plus the mean over the beds of the run's change against the run
+        of the same bed in ``bed_bases`` (the baseline's, the replicates'). Beds whose run or
+        base failed are left out of the mean; a level with no bed left is an error row. Nothing
+        changes with one bed per level."""
         if len(self.beds) < 2:
             return rows
         order: list[Any] = []
         groups: dict[tuple[str, float, bool, str | None], list[Row]] = {}
         for r in rows:
             n = r["hypothesis"]
-            if "search_value" in r and n in self.searched and self.searched[n].deposits:
+            if "search_value" in r and (n == STIFFER or n in self.searched
+                                        and self.searched[n].deposits):
                 key = (n, float(r["search_value"]), bool(r.get("refined")), r.get("form"))
                 if key not in groups:
                     groups[key] = []
@@ -771,8 +773,7 @@ class _Confirmation:
                   {"hypothesis": "baseline", "aligned": rep.baseline})
             self.set_beds(b0, rows, b0["aligned"])
             rows = [rows[0]] + self.pooled(rows[1:])
-            n = len(self.beds)
-            stiff_rows = [self._pool(stiff_rows[i:i + n]) for i in range(0, len(stiff_rows), n)]
+            stiff_rows = self.pooled(stiff_rows)
         recal_row = rows[0]
         # reference: the better of the baseline simulation and the recalibrated full run
         base_row: Row = {"hypothesis": "baseline", "score": float(rep.fit["before"]["overall"]),

@@ -227,7 +227,6 @@ def test_dem_diagnosis_cost(dem_runs):
         if "full_search" in r.fit:
             stiff = r.fit["realisation"]["stiffer_soil"]
             assert sum(s["runs"] for s in stiff) == N_STIFFER_RUNS
-        if "full_search" in r.fit:
             assert r.fit["full_search"]["runs"] >= N_SEARCH_RUNS
             assert r.fit["full_search"]["level_beds"] == N_BEDS
 

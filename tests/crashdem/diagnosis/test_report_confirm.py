@@ -1595,8 +1595,8 @@ def test_a_stiffer_soil_is_not_named_a_layer():
              "physics.soil_layering.lower_young_factor": 5.0}))
         rec = acquire(p, np.random.default_rng(7))
         rep = screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
-                                  numerics=(), replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)],
-                                  level_beds=5)
+                                  numerics=(), level_beds=5,
+                                  replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)])
         assert rep.simulations["full_simulations"] == len(calls)
         return rep
 
