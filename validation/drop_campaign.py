@@ -173,6 +173,8 @@ def main(argv=None) -> int:
             "peak_decel_g": r["peak_decel_g"],
             "max_penetration_m": r["max_penetration_m"],
             "t_rebound_s": r["t_rebound_s"],
+            "t_max_penetration_s": r["t_max_penetration_s"],
+            "t_last_s": r["t_last_s"],
             "double_peak": r["double_peak"],
             "peak_force_N": r["peak_force_N"],
             "impact_duration_s": r["impact_duration_s"],

@@ -225,7 +225,8 @@ def impact_metrics(rec: DropRecord, **peak_options) -> dict:
     the moment the soil force falls below ``PULSE_LEVEL`` times its peak for the last time
     (the mass stays in its crater, so the force never returns to zero; the 10 % level is the
     pulse-width convention).  ``t_rebound_s`` is the first sign change of ``v_z`` from
-    downward to upward (thesis §2.1.3).  ``double_peak`` uses :func:`detect_double_peak` on the
+    downward to upward (thesis §2.1.3), NaN when the mass still sinks at the end of the record
+    (``t_last_s``, the last sample's time).  ``double_peak`` uses :func:`detect_double_peak` on the
     deceleration between contact and the maximum penetration (the loading phase).
     """
     t = rec.t - rec.t_contact
@@ -248,6 +249,7 @@ def impact_metrics(rec: DropRecord, **peak_options) -> dict:
         "t_peak_decel_s": float(t[k_a]),
         "max_penetration_m": float(rec.penetration[k_p]),
         "t_max_penetration_s": float(t[k_p]),
+        "t_last_s": float(t[-1]),
         "impact_duration_s": duration,
         "t_rebound_s": t_reb,
         "rebound_speed_m_s": reb_speed,

@@ -1,0 +1,66 @@
+"""Print a fingerprint of this machine's DEM realisation: the SHA-256 of the DEM-truth baseline
+run's channels (``generator_dem.dem_baseline``: deposition and impact of the small bed, run in a
+fresh cache) beside the CPU, the Python and the numerics libraries.
+
+Two machines that print the same digest give the DEM-truth tests and the diagnosis validation
+the same runs, bit for bit. Session 30's machine (AMD EPYC) printed ``b991ab66708d66af`` and
+named the DEM-truth floors at 0.915 / 0.90 m, where the machines of sessions 21-28 named them
+at 0.712 / 0.80 m from the same code (docs/diagnosis.md, "Another machine, another
+realisation"). Usage: ``python validation/realisation_fingerprint.py`` (a few seconds after the
+Numba kernels are compiled).
+"""
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import sys
+import tempfile
+from pathlib import Path
+
+
+def cpu_model() -> str:
+    """The CPU's model name from /proc/cpuinfo (``platform.processor()`` elsewhere)."""
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def digest(signals) -> str:
+    """The first 16 hex digits of the SHA-256 of the channels' names and float64 samples."""
+    import numpy as np
+
+    h = hashlib.sha256()
+    for name in sorted(signals):
+        h.update(name.encode())
+        h.update(np.ascontiguousarray(signals[name].data, dtype=np.float64).tobytes())
+    return h.hexdigest()[:16]
+
+
+def fingerprint() -> dict[str, object]:
+    """The digest of a fresh DEM-truth baseline run and what it ran on."""
+    import numba
+    import numpy as np
+    import scipy
+
+    from crashdem.diagnosis.generator_dem import dem_baseline
+
+    with tempfile.TemporaryDirectory() as d:
+        sig = dem_baseline(cache=Path(d))
+    return {"digest": digest(sig), "cpu": cpu_model(), "machine": platform.machine(),
+            "python": sys.version.split()[0], "numpy": np.__version__,
+            "scipy": scipy.__version__, "numba": numba.__version__,
+            "threads": numba.config.NUMBA_NUM_THREADS}
+
+
+def main() -> int:
+    print(json.dumps(fingerprint()))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
