@@ -3,11 +3,13 @@ run's channels (``generator_dem.dem_baseline``: deposition and impact of the sma
 fresh cache) beside the CPU, the Python and the numerics libraries.
 
 Two machines that print the same digest give the DEM-truth tests and the diagnosis validation
-the same runs, bit for bit. Session 30's machine (AMD EPYC) printed ``b991ab66708d66af`` and
-named the DEM-truth floors at 0.915 / 0.90 m, where the machines of sessions 21-28 named them
-at 0.712 / 0.80 m from the same code (docs/diagnosis.md, "Another machine, another
-realisation"). Usage: ``python validation/realisation_fingerprint.py`` (a few seconds after the
-Numba kernels are compiled).
+the same runs, bit for bit. ``deposition_digest`` is the deposited bed's alone (grain positions,
+radii and materials): when two machines' digests differ, it tells whether the deposition already
+does. Session 30's machine (AMD EPYC) printed ``b991ab66708d66af`` (deposition
+``bd6d0870cf204247``) and named the DEM-truth floors at 0.915 / 0.90 m, where the machines of
+sessions 21-28 named them at 0.712 / 0.80 m from the same code (docs/diagnosis.md, "Another
+machine, another realisation"). Usage: ``python validation/realisation_fingerprint.py`` (a few
+seconds after the Numba kernels are compiled).
 """
 from __future__ import annotations
 
@@ -41,6 +43,20 @@ def digest(signals) -> str:
     return h.hexdigest()[:16]
 
 
+def packing_digest(path: Path) -> str:
+    """The first 16 hex digits of the SHA-256 of a cached packing's grain positions, radii and
+    materials: the deposition alone, before any impact."""
+    import h5py
+    import numpy as np
+
+    h = hashlib.sha256()
+    with h5py.File(path, "r") as f:
+        for name in ("x", "radius", "material"):
+            h.update(name.encode())
+            h.update(np.ascontiguousarray(f[name][()]).tobytes())
+    return h.hexdigest()[:16]
+
+
 def fingerprint() -> dict[str, object]:
     """The digest of a fresh DEM-truth baseline run and what it ran on."""
     import numba
@@ -51,9 +67,11 @@ def fingerprint() -> dict[str, object]:
 
     with tempfile.TemporaryDirectory() as d:
         sig = dem_baseline(cache=Path(d))
-    return {"digest": digest(sig), "cpu": cpu_model(), "machine": platform.machine(),
-            "python": sys.version.split()[0], "numpy": np.__version__,
-            "scipy": scipy.__version__, "numba": numba.__version__,
+        beds = sorted(Path(d).rglob("packing-*.h5"))
+        bed = packing_digest(beds[0]) if len(beds) == 1 else None
+    return {"digest": digest(sig), "deposition_digest": bed, "cpu": cpu_model(),
+            "machine": platform.machine(), "python": sys.version.split()[0],
+            "numpy": np.__version__, "scipy": scipy.__version__, "numba": numba.__version__,
             "threads": numba.config.NUMBA_NUM_THREADS}
 
 
