@@ -32,29 +32,31 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-def digest(signals) -> str:
-    """The first 16 hex digits of the SHA-256 of the channels' names and float64 samples."""
+def _sha16(arrays) -> str:
+    """The first 16 hex digits of the SHA-256 of ``(name, array)`` pairs, names and bytes."""
     import numpy as np
 
     h = hashlib.sha256()
-    for name in sorted(signals):
+    for name, a in arrays:
         h.update(name.encode())
-        h.update(np.ascontiguousarray(signals[name].data, dtype=np.float64).tobytes())
+        h.update(np.ascontiguousarray(a).tobytes())
     return h.hexdigest()[:16]
+
+
+def digest(signals) -> str:
+    """The digest of the channels' names and float64 samples."""
+    import numpy as np
+
+    return _sha16((n, np.asarray(signals[n].data, dtype=np.float64)) for n in sorted(signals))
 
 
 def packing_digest(path: Path) -> str:
-    """The first 16 hex digits of the SHA-256 of a cached packing's grain positions, radii and
-    materials: the deposition alone, before any impact."""
-    import h5py
-    import numpy as np
+    """The digest of a cached packing's grain positions, radii and materials
+    (``soil.packing.load_packing``): the deposition alone, before any impact."""
+    from soil.packing import load_packing
 
-    h = hashlib.sha256()
-    with h5py.File(path, "r") as f:
-        for name in ("x", "radius", "material"):
-            h.update(name.encode())
-            h.update(np.ascontiguousarray(f[name][()]).tobytes())
-    return h.hexdigest()[:16]
+    p = load_packing(path)
+    return _sha16((n, getattr(p, n)) for n in ("x", "radius", "material"))
 
 
 def fingerprint() -> dict[str, object]:

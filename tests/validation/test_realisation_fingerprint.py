@@ -7,6 +7,8 @@ import sys
 import tempfile
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
@@ -14,15 +16,21 @@ if str(ROOT) not in sys.path:
 from validation import realisation_fingerprint as rf  # noqa: E402
 
 
-def test_the_fingerprint_is_reproduced_by_a_fresh_run():
-    a, b = rf.fingerprint(), rf.fingerprint()
+@pytest.fixture(scope="module")
+def two_fingerprints():
+    """Two fingerprints, each from its own fresh deposition and impact."""
+    return rf.fingerprint(), rf.fingerprint()
+
+
+def test_the_fingerprint_is_reproduced_by_a_fresh_run(two_fingerprints):
+    a, b = two_fingerprints
     assert a == b
     for key in ("digest", "deposition_digest"):
         assert len(str(a[key])) == 16 and int(str(a[key]), 16) >= 0
     assert a["threads"] >= 1 and a["cpu"]
 
 
-def test_the_digest_follows_the_packing():
+def test_the_digest_follows_the_packing(two_fingerprints):
     """The digest is of the run's bytes: another packing seed of the same bed gives another."""
     from crashdem.diagnosis.generator_dem import BASELINE_NUMERICS, run_dem
 
@@ -32,5 +40,5 @@ def test_the_digest_follows_the_packing():
         return rf.digest(sig)
 
     base = digest(dict(BASELINE_NUMERICS))
-    assert base == rf.fingerprint()["digest"]
+    assert base == two_fingerprints[0]["digest"]
     assert digest({**BASELINE_NUMERICS, "scenario.seed": 2}) != base
