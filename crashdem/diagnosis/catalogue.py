@@ -18,6 +18,7 @@ Estrada, Taboada & Radjai 2008, PRE 78:021301) to be calibrated against DEM runs
 """
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping
@@ -166,6 +167,41 @@ class Hypothesis:
         }
 
 
+def _cohesion_to_scenario(v: dict[str, float]) -> dict[str, Any]:
+    return {"physics.cohesion.normal_strength": float(v["cohesion"]),
+            "physics.cohesion.shear_strength": float(v["cohesion"])}
+
+
+def _combined_to_scenario(hs: tuple[Hypothesis, ...], v: dict[str, float]) -> dict[str, Any]:
+    """The scenario overrides of the hypotheses ``hs`` switched on together."""
+    out: dict[str, Any] = {}
+    for h in hs:
+        out.update(h.scenario_overrides(v))
+    return out
+
+
+def _wall_to_scenario(geo: dict[str, float], k0: float, v: dict[str, float]) -> dict[str, Any]:
+    """Planar rear wall -> scenario: the container length from the wall distance, the panel
+    modulus from the wall stiffness (``geo``: ``planar_catalogue``'s geometry, ``k0`` the
+    baseline's wall stiffness)."""
+    out: dict[str, Any] = {}
+    if "impact_height" in geo and "slope" in geo and "wall_distance" in v:
+        out["container.length"] = float(v["wall_distance"]) + \
+            geo["impact_height"] / math.tan(geo["slope"])
+    if "wall_young" in geo and "wall_stiffness" in v:
+        out["container.wall_young"] = geo["wall_young"] * float(v["wall_stiffness"]) / k0
+    return out
+
+
+def _planar_ic_to_scenario(v: dict[str, float]) -> dict[str, Any]:
+    """Planar initial conditions -> scenario (speed, flight-path angle and pitch offsets)."""
+    return {"physics.initial_conditions.velocity_offset": float(v.get("speed_offset", 0.0)),
+            "physics.initial_conditions.angle_offset_deg":
+                math.degrees(float(v.get("angle_offset", 0.0))),
+            "physics.initial_conditions.pitch_offset_deg":
+                math.degrees(float(v.get("pitch_offset", 0.0)))}
+
+
 def _rotation_to_scenario(v: dict[str, float]) -> dict[str, Any]:
     mu = rolling_from_friction_ratio(v["friction_ratio"])
     return {"soil.rotation": "free", "soil.rolling_coefficient": mu,
@@ -238,8 +274,7 @@ CATALOGUE: tuple[Hypothesis, ...] = (
                        "physics.cohesion.normal_strength", off=1.0e3),),
         "physics.cohesion.enabled",
         ("peak_too_low", "rebound_too_strong", "force_too_low"),
-        to_scenario=lambda v: {"physics.cohesion.normal_strength": float(v["cohesion"]),
-                               "physics.cohesion.shear_strength": float(v["cohesion"])},
+        to_scenario=_cohesion_to_scenario,
     ),
     Hypothesis(
         "particle_rotation",
@@ -597,12 +632,6 @@ class Catalogue:
         for h in hs:
             params += [p for p in h.parameters if p.name not in {q.name for q in params}]
 
-        def to_scen(v: dict[str, float]) -> dict[str, Any]:
-            out: dict[str, Any] = {}
-            for h in hs:
-                out.update(h.scenario_overrides(v))
-            return out
-
         # discrete forms: the product of the parts' variants (labels joined by "+")
         variants: tuple[Variant, ...] = ()
         for h in hs:
@@ -616,7 +645,8 @@ class Catalogue:
                                  for b in h.variants)
         return Hypothesis("+".join(names), " AND ".join(h.physics for h in hs), tuple(params),
                           None, tuple(sig for h in hs for sig in h.signature),
-                          to_scenario=to_scen, variants=variants)
+                          to_scenario=functools.partial(_combined_to_scenario, tuple(hs)),
+                          variants=variants)
 
     def describe(self) -> list[dict[str, Any]]:
         """JSON-ready descriptions of the recalibration and every entry."""
@@ -666,22 +696,6 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
     d_hi = max(2.0, 1.25 * d0)
     d_lo = min(0.2, 0.5 * d0)
 
-    def wall_to_scen(v: dict[str, float]) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        if "impact_height" in geo and "slope" in geo and "wall_distance" in v:
-            out["container.length"] = float(v["wall_distance"]) + \
-                geo["impact_height"] / math.tan(geo["slope"])
-        if "wall_young" in geo and "wall_stiffness" in v:
-            out["container.wall_young"] = geo["wall_young"] * float(v["wall_stiffness"]) / k0
-        return out
-
-    def ic_to_scen(v: dict[str, float]) -> dict[str, Any]:
-        return {"physics.initial_conditions.velocity_offset": float(v.get("speed_offset", 0.0)),
-                "physics.initial_conditions.angle_offset_deg":
-                    math.degrees(float(v.get("angle_offset", 0.0))),
-                "physics.initial_conditions.pitch_offset_deg":
-                    math.degrees(float(v.get("pitch_offset", 0.0)))}
-
     entries = []
     for h in CATALOGUE:
         if h.name == "soil_layering":
@@ -700,7 +714,7 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
                                None, off=k0, grid=3)),
                 "physics.boundary_proximity.enabled",
                 ("missing_peak", "extra_peak", "peak_early"),
-                to_scenario=wall_to_scen)
+                to_scenario=functools.partial(_wall_to_scenario, geo, k0))
         elif h.name == "initial_conditions":
             h = Hypothesis(
                 "initial_conditions",
@@ -714,7 +728,7 @@ def planar_catalogue(base, geometry: dict[str, float] | None = None) -> Catalogu
                                "added to the pitch attitude (nose up positive)", None, off=0.0)),
                 "physics.initial_conditions.enabled",
                 ("initial_offset", "peak_too_high", "peak_too_low", "peak_early", "peak_late"),
-                to_scenario=ic_to_scen)
+                to_scenario=_planar_ic_to_scenario)
         entries.append(h)
     return Catalogue(tuple(entries), "planar",
                      {"soil_layering": "the container's layers are horizontal, the planar "

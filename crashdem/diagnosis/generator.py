@@ -31,7 +31,7 @@ if TYPE_CHECKING:
 
 __all__ = ["ConcealedCase", "EFFECT_DRAWS", "TRUTH_DT", "acquire", "acquire_samples",
            "concealed_case", "draw_effect", "ACCEPT_TOP1_RATE", "ACCEPT_PARAM_RTOL",
-           "ACCEPT_SCORE_GAIN", "ACCEPT_SCORE_AFTER"]
+           "ACCEPT_SCORE_GAIN", "ACCEPT_SCORE_AFTER", "diagnose_cases"]
 
 #: issue 7's acceptance numbers for the proof on concealed effects (the tests of every truth
 #: generator -- ROM, DEM, glider -- assert these): the top-ranked hypothesis is the concealed
@@ -233,3 +233,29 @@ def baseline(base: RomParams = RomParams(), settings: RomSettings = RomSettings(
 
     return simulate(base, settings)
 
+
+
+def _diagnosed_case(job: tuple[int, str | None, dict[str, float] | None]):
+    """Worker of ``diagnose_cases``: one case generated and diagnosed, with the seconds the
+    diagnosis took."""
+    import time
+
+    from crashdem.diagnosis import diagnose
+    from crashdem.diagnosis.rom import simulate
+
+    seed, effect, recal = job
+    case = concealed_case(seed, effect, recalibration=recal)
+    t0 = time.perf_counter()
+    rep = diagnose(simulate(RomParams()), case.recording)
+    return case, rep, time.perf_counter() - t0
+
+
+def diagnose_cases(cases, workers: int | None = None) -> list:
+    """``(case, report, seconds)`` of each ``(seed, effect[, recalibration])`` of ``cases``:
+    ``concealed_case`` diagnosed by ``diagnose`` against the default ROM baseline
+    (``simulate(RomParams())``), the cases spread over ``workers`` processes
+    (``parallel.map_processes``; the same reports as one by one, in the order of ``cases``)."""
+    from crashdem.diagnosis.parallel import map_processes
+
+    jobs = [(int(c[0]), c[1], c[2] if len(c) > 2 else None) for c in cases]
+    return map_processes(_diagnosed_case, jobs, workers)

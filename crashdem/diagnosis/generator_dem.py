@@ -54,7 +54,8 @@ from crashdem.signal import Signal
 __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
            "replicates", "use_scenario",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
-           "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS"]
+           "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS",
+           "prefetch", "prefetch_cases"]
 
 #: the drop-test scenario of the truth and baseline
 SCENARIO = Path(__file__).resolve().parents[2] / "validation" / "scenarios" / "drop_s2_h13p70.toml"
@@ -217,6 +218,72 @@ def _key(overrides: dict[str, Any]) -> str:
     return h.hexdigest()[:20]
 
 
+def _cache_file(overrides: dict[str, Any], filtered: bool, cache: Path | None) -> Path:
+    """The cache entry of ``run_dem(overrides, filtered=filtered, cache=cache)``."""
+    key = _key({**BASE_OVERRIDES, **overrides, "_filtered": filtered})
+    return (cache or cache_dir()) / "diagnosis_truth" / f"{key}.npz"
+
+
+def _prefetch_one(job: tuple[str, str, Any]) -> None:
+    """Worker side of ``prefetch``: ``("run", scenario, (overrides, filtered, cache))`` runs
+    ``run_dem``, ``("case", scenario, (seed, effect, cache))`` ``dem_concealed_case`` (the truth
+    run; the baseline is in the cache already), each on the parent's scenario file."""
+    kind, scenario, args = job
+    if Path(scenario).resolve() != SCENARIO:
+        use_scenario(scenario)
+    if kind == "run":
+        overrides, filtered, cache = args
+        run_dem(overrides, filtered=filtered, cache=cache)
+    else:
+        seed, effect, cache = args
+        dem_concealed_case(seed, effect, cache=cache)
+
+
+def _fan_out(jobs: list[tuple[str, str, Any]], workers: int | None) -> int:
+    """Run ``jobs`` on worker processes (``parallel.map_processes``; nothing when only one
+    would run: the caller then runs them itself); a job that raises is left to the caller,
+    who runs it again in its own process and so reports it as the serial path would. Returns
+    the jobs dispatched."""
+    from crashdem.diagnosis.parallel import check_workers, map_processes
+
+    if min(check_workers(workers), len(jobs)) < 2:
+        return 0
+    map_processes(_prefetch_one, jobs, workers, return_exceptions=True)
+    return len(jobs)
+
+
+def prefetch(requests: list[tuple[dict[str, Any], bool]], *, cache: Path | None = None,
+             workers: int | None = None) -> int:
+    """Put the runs ``run_dem(overrides, filtered=filtered)`` of ``requests`` (pairs
+    ``(overrides, filtered)``) in the disk cache, the missing ones in parallel on ``workers``
+    processes (default ``parallel.default_workers()``: the cores, or
+    ``$CRASHDEM_DEM_WORKERS``); the caller then loads them. Every run is the same
+    deterministic single-threaded run wherever it executes, so the results do not depend on
+    ``workers``. Returns the number of runs dispatched to the workers (0: none missing, one
+    worker, or one run -- left to the caller)."""
+    seen: set[Path] = set()
+    jobs = []
+    for ov, filtered in requests:
+        f = _cache_file(ov, filtered, cache)
+        if f in seen or f.exists():
+            continue
+        seen.add(f)
+        jobs.append(("run", str(SCENARIO), (dict(ov), bool(filtered), cache)))
+    return _fan_out(jobs, workers)
+
+
+def prefetch_cases(cases: list[tuple[int, str | None]], *, cache: Path | None = None,
+                   workers: int | None = None) -> int:
+    """Run the truths of the DEM-truth cases ``(seed, effect)`` (``dem_concealed_case``) in
+    parallel on ``workers`` processes so that generating them afterwards loads them from the
+    cache (those whose truth is cached already are left out); the baseline is run first, here.
+    Returns the cases dispatched."""
+    dem_baseline(cache)
+    jobs = [("case", str(SCENARIO), (int(seed), effect, cache)) for seed, effect in cases
+            if not _cache_file(_truth_draws(int(seed), effect, {})[2], False, cache).exists()]
+    return _fan_out(jobs, workers)
+
+
 def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = None
             ) -> tuple[dict[str, Signal], dict[str, Any]]:
     """Run (or load from the disk cache) the drop scenario with ``overrides`` on top of
@@ -226,10 +293,9 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
 
     ov = {**BASE_OVERRIDES, **overrides}
     root = (cache or cache_dir())
-    key = _key({**ov, "_filtered": filtered})
-    store = root / "diagnosis_truth"
+    f = _cache_file(overrides, filtered, cache)
+    key, store = f.stem, f.parent
     store.mkdir(parents=True, exist_ok=True)
-    f = store / f"{key}.npz"
     if f.exists():
         try:
             z = np.load(f, allow_pickle=False)
@@ -383,12 +449,7 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
     """
     recal = check_recalibration(recalibration)
     rng = np.random.default_rng(seed)
-    if effect == "random":
-        names = sorted(DEM_EFFECT_DRAWS)
-        effect = names[int(rng.integers(len(names)))]
-    eff_ov = draw_dem_effect(effect, rng) if effect is not None else {}
-    num = truth_numerics(rng, seed)
-    truth_ov = {**num, **eff_ov, **recal}
+    effect, eff_ov, truth_ov = _truth_draws(seed, effect, recal, rng)
     rec, meta, offset = _acquired_truth(truth_ov, rng, cache)
     values: dict[str, float] = {}
     drawn: dict[str, float] = {}
@@ -399,6 +460,20 @@ def dem_concealed_case(seed: int, effect: str | None = "random", *, cache: Path 
                  if not k.endswith(".enabled")}
     return DemConcealedCase(effect, values, recal, seed, rec, truth_ov, offset, meta, drawn,
                             dem_baseline(cache))
+
+
+def _truth_draws(seed: int, effect: str | None, recal: dict[str, float],
+                 rng: np.random.Generator | None = None
+                 ) -> tuple[str | None, dict[str, Any], dict[str, Any]]:
+    """The effect, its overrides and the truth run's overrides of ``dem_concealed_case(seed,
+    effect)``, drawn from ``rng`` (default: a fresh generator of ``seed``, as the case draws)."""
+    rng = np.random.default_rng(seed) if rng is None else rng
+    if effect == "random":
+        names = sorted(DEM_EFFECT_DRAWS)
+        effect = names[int(rng.integers(len(names)))]
+    eff_ov = draw_dem_effect(effect, rng) if effect is not None else {}
+    num = truth_numerics(rng, seed)
+    return effect, eff_ov, {**num, **eff_ov, **recal}
 
 
 def _acquired_truth(truth_ov: dict[str, Any], rng: np.random.Generator, cache: Path | None,
@@ -452,19 +527,39 @@ class DemFullSimulator:
     ``overrides`` are scenario keys (``physics.<name>.*``) and ``calibration.*_scale`` factors,
     applied to the baseline scenario (baseline numerics) as ``crashdem diagnose --full-confirm``
     does (``cli._apply_scales``). Runs are cached like the truth runs; ``calls`` counts requests.
+    A batch (``map``: the search levels, the replicates) runs its uncached runs on ``workers``
+    processes first (``prefetch``; default the cores): the same signals, bit for bit, as one by
+    one (``tests/crashdem/diagnosis/test_dem_prefetch.py``).
     """
 
-    def __init__(self, cache: Path | None = None):
+    def __init__(self, cache: Path | None = None, workers: int | None = None):
         from crashdem import scenario as sc
+
+        from crashdem.diagnosis.parallel import check_workers
 
         self.cache = cache
         self.calls = 0
+        self.workers = check_workers(workers)
         self.scenario = sc.load(SCENARIO, {**BASE_OVERRIDES, **BASELINE_NUMERICS})
 
-    def __call__(self, overrides: dict[str, Any]) -> dict[str, Signal]:
+    def _run_overrides(self, overrides: dict[str, Any]) -> dict[str, Any]:
         from crashdem.diagnosis.distributed import scenario_overrides
 
+        return {**BASELINE_NUMERICS, **scenario_overrides(self.scenario, overrides)}
+
+    def __call__(self, overrides: dict[str, Any]) -> dict[str, Signal]:
         self.calls += 1
-        fields = scenario_overrides(self.scenario, overrides)
-        sigs, _ = run_dem({**BASELINE_NUMERICS, **fields}, filtered=True, cache=self.cache)
+        sigs, _ = run_dem(self._run_overrides(overrides), filtered=True, cache=self.cache)
         return sigs
+
+    def map(self, batch: list[dict[str, Any]]) -> list[dict[str, Signal]]:
+        """``[self(ov) for ov in batch]``, the uncached runs first run in parallel on
+        ``self.workers`` processes (``prefetch``); the same signals as one by one."""
+        reqs = []
+        for ov in batch:
+            try:
+                reqs.append((self._run_overrides(ov), True))
+            except Exception:  # noqa: BLE001 - not representable: raised by self(ov) below
+                pass
+        prefetch(reqs, cache=self.cache, workers=self.workers)
+        return [self(ov) for ov in batch]

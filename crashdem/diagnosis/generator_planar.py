@@ -38,7 +38,7 @@ from crashdem.diagnosis.rom_planar import PlanarParams, run_planar_raw, simulate
 from crashdem.signal import Signal
 
 __all__ = ["GLIDER_BASE", "PLANAR_EFFECT_DRAWS", "PlanarConcealedCase", "planar_concealed_case",
-           "planar_baseline", "RAW_NOISE_PLANAR", "RECORD_END"]
+           "planar_baseline", "RAW_NOISE_PLANAR", "RECORD_END", "diagnose_cases"]
 
 #: the diagnosed glider model: ``planar_from_scenario(glider_real.toml)`` (module notes)
 GLIDER_BASE = PlanarParams(
@@ -102,3 +102,22 @@ def planar_concealed_case(seed: int, effect: str | None, *,
 def planar_baseline(base: PlanarParams = GLIDER_BASE) -> dict[str, Signal]:
     """The diagnosed glider simulation (the planar model at its own numerics, no effect)."""
     return simulate_planar(base, RomSettings(t_pre=PRE_TRIGGER, t_end=RECORD_END))
+
+
+def _diagnosed_case(job: tuple[int, str | None]):
+    """Worker of ``diagnose_cases``: one glider case generated and diagnosed."""
+    from crashdem.diagnosis import diagnose
+
+    seed, effect = job
+    case = planar_concealed_case(seed, effect)
+    return case, diagnose(planar_baseline(), case.recording, rom_base=GLIDER_BASE)
+
+
+def diagnose_cases(cases, workers: int | None = None) -> list:
+    """``(case, report)`` of each glider case ``(seed, effect)``: ``planar_concealed_case``
+    diagnosed by ``diagnose`` against ``planar_baseline()`` (``rom_base=GLIDER_BASE``), the
+    cases spread over ``workers`` processes (``parallel.map_processes``; the same reports as one
+    by one, in the order of ``cases``)."""
+    from crashdem.diagnosis.parallel import map_processes
+
+    return map_processes(_diagnosed_case, [(int(s), e) for s, e in cases], workers)

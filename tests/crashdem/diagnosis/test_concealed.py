@@ -9,7 +9,6 @@ to 10 ms after the pulse), averaged over the diagnosed channels (``accel_z``, ``
 """
 from __future__ import annotations
 
-import time
 from collections import Counter
 
 import numpy as np
@@ -20,7 +19,7 @@ from crashdem.diagnosis.generator import ACCEPT_PARAM_RTOL as PARAM_RTOL
 from crashdem.diagnosis.generator import ACCEPT_SCORE_AFTER as MIN_SCORE_AFTER
 from crashdem.diagnosis.generator import ACCEPT_SCORE_GAIN as MIN_SCORE_GAIN
 from crashdem.diagnosis.generator import ACCEPT_TOP1_RATE as MIN_TOP1_RATE
-from crashdem.diagnosis.generator import concealed_case
+from crashdem.diagnosis.generator import diagnose_cases
 from crashdem.diagnosis.rom import RomParams, simulate
 
 #: effects whose ISO/TS 18571 footprint leaves room for the 0.1 improvement criterion
@@ -38,18 +37,9 @@ RECAL_TRUTH = {"strength_scale": 1.25, "stiffness_scale": 0.8}
 
 @pytest.fixture(scope="module")
 def runs():
-    base = simulate(RomParams())
-    out = []
     cases = [(e, s) for e in (*EFFECTS, DAMPING) for s in SEEDS] + [(None, s) for s in NULL_SEEDS]
-    for effect, seed in cases:
-        case = concealed_case(seed, effect)
-        t0 = time.perf_counter()
-        rep = diagnose(base, case.recording)
-        out.append((case, rep, time.perf_counter() - t0))
-    case = concealed_case(RECAL_SEED, None, recalibration=RECAL_TRUTH)
-    t0 = time.perf_counter()
-    rep = diagnose(base, case.recording)
-    out.append((case, rep, time.perf_counter() - t0))
+    # generated and diagnosed (against simulate(RomParams())) one per core, in this order
+    out = diagnose_cases([(s, e) for e, s in cases] + [(RECAL_SEED, None, RECAL_TRUTH)])
     # confusion matrix (truth row -> top-ranked hypothesis) and per-case numbers
     conf = Counter((c.effect or "null", r.hypotheses[0]["name"]) for c, r, _ in out)
     print("\nconfusion (truth -> top-ranked):")
