@@ -224,6 +224,12 @@ def _cache_file(overrides: dict[str, Any], filtered: bool, cache: Path | None) -
     return (cache or cache_dir()) / "diagnosis_truth" / f"{key}.npz"
 
 
+def _resolved(cache: Path | None) -> Path:
+    """The cache root as an absolute path, for a worker whose environment and working directory
+    are those of when it was started (``$CRASHDEM_CACHE`` may have changed since)."""
+    return Path(cache or cache_dir()).expanduser().resolve()
+
+
 def _prefetch_one(job: tuple[str, str, Any]) -> None:
     """Worker side of ``prefetch``: ``("run", scenario, (overrides, filtered, cache))`` runs
     ``run_dem``, ``("case", scenario, (seed, effect, cache))`` ``dem_concealed_case`` (the truth
@@ -261,6 +267,7 @@ def prefetch(requests: list[tuple[dict[str, Any], bool]], *, cache: Path | None 
     deterministic single-threaded run wherever it executes, so the results do not depend on
     ``workers``. Returns the number of runs dispatched to the workers (0: none missing, one
     worker, or one run -- left to the caller)."""
+    root = _resolved(cache)
     seen: set[Path] = set()
     jobs = []
     for ov, filtered in requests:
@@ -268,7 +275,7 @@ def prefetch(requests: list[tuple[dict[str, Any], bool]], *, cache: Path | None 
         if f in seen or f.exists():
             continue
         seen.add(f)
-        jobs.append(("run", str(SCENARIO), (dict(ov), bool(filtered), cache)))
+        jobs.append(("run", str(SCENARIO), (dict(ov), bool(filtered), root)))
     return _fan_out(jobs, workers)
 
 
@@ -279,8 +286,9 @@ def prefetch_cases(cases: list[tuple[int, str | None]], *, cache: Path | None = 
     cache (those whose truth is cached already are left out); the baseline is run first, here.
     Returns the cases dispatched."""
     dem_baseline(cache)
-    jobs = [("case", str(SCENARIO), (int(seed), effect, cache)) for seed, effect in cases
-            if not _cache_file(_truth_draws(int(seed), effect, {})[2], False, cache).exists()]
+    root = _resolved(cache)
+    jobs = [("case", str(SCENARIO), (int(seed), effect, root)) for seed, effect in cases
+            if not _cache_file(_truth_draws(int(seed), effect, {})[2], False, root).exists()]
     return _fan_out(jobs, workers)
 
 

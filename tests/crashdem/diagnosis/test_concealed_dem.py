@@ -489,7 +489,9 @@ def test_cli_reads_other_conventions_of_the_same_recording(tmp_path):
     diagnose`` reads the unit, turns the velocity (sign-convention check) and adds g back to
     the acceleration (its free-fall level is -g: ``fit.free_fall_convention``), and gives the
     library path's answer: ``initial_conditions`` with the offset measured from the free fall
-    (-2.715 m/s, truth -2.693: within 1 %). Measured on Yade recordings through the CLI: g, release, shifted time,
+    (-2.715 m/s, truth -2.693: within 1 %), by the default path of
+    ``test_cli_runs_the_baseline_dem_itself`` (the baseline run here, the full-DEM confirmation,
+    4 replicate packings). Measured on Yade recordings through the CLI: g, release, shifted time,
     flipped signs, 1 kHz, kinematic acceleration, downward velocity and position change no
     decision in 34 diagnoses (docs/diagnosis.md, "Recording formats through the CLI")."""
     case = dem_concealed_case(11, "initial_conditions")
@@ -497,8 +499,9 @@ def test_cli_reads_other_conventions_of_the_same_recording(tmp_path):
     t0 = a.t[0]
     rec = {"accel_z": Signal("accel_z", a.t - t0, a.data / 9.80665 - 1.0, "g", a.cfc),
            "velocity_z": Signal("velocity_z", v.t - t0, -v.data, "m/s", v.cfc)}
-    rep, _ = _cli_diagnose(tmp_path, 11, rec)
+    rep, out = _cli_diagnose(tmp_path, 11, rec)
     assert rep["missing_physics"] == "initial_conditions", rep["decision"]
+    _assert_default_full_path(rep, out)
     ff = rep["fit"]["free_fall_convention"]["accel_z"]
     assert ff["read_as"] == "kinematic acceleration" and ff["added"] == pytest.approx(9.81)
     assert rep["fit"]["sign_convention"]["velocity_z"]["flipped"]
@@ -580,21 +583,27 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     assert not (tmp_path / "user").exists()  # the default cache was not used
 
 
-@pytest.mark.parametrize("seed, effect", [(21, None), (11, "initial_conditions")])
-def test_cli_runs_the_baseline_dem_itself(tmp_path, seed, effect):
+def test_cli_runs_the_baseline_dem_itself(tmp_path):
     """``crashdem diagnose --scenario S --recording REC`` with no result of S on disk runs S with
     the full DEM (``--baseline run``, the default), anchors the screening on it and reaches the
-    same verdict as the library path: nothing claimed on a null DEM-truth recording, the
-    concealed effect named otherwise. Oracle: the generator's hidden truth."""
-    case = dem_concealed_case(seed, effect)
-    rep, out = _cli_diagnose(tmp_path, seed, case.recording)
+    same verdict as the library path: nothing claimed on a null DEM-truth recording (the
+    concealed effect named on an effect recording: the speed offset of seed 11, in
+    ``test_cli_reads_other_conventions_of_the_same_recording``, which checks the same default
+    path). Oracle: the generator's hidden truth."""
+    case = dem_concealed_case(21, None)
+    rep, out = _cli_diagnose(tmp_path, 21, case.recording)
+    assert rep["missing_physics"] is None, rep["decision"]
+    _assert_default_full_path(rep, out)
+
+
+def _assert_default_full_path(rep, out):
+    """What the default ``crashdem diagnose`` of a DEM-truth recording runs and reports."""
     assert rep["simulations"]["baseline_source"].startswith("full run")
     # the default confirms with the full DEM (recalibrated run, + candidates when claimed), its
     # runs reading the recorded channels through the impactor's channel names
     assert rep["simulations"]["full_simulations"] >= 1
     assert all(r.get("score") is not None for r in rep["fit"]["confirmation"])
     assert rep["fit"]["sensor_check"]["applicable"] and not rep["fit"]["sensor_check"]["detected"]
-    assert rep["missing_physics"] == effect
     # the default realisation floor: 4 replicate packings (scenario.seed 2-5) run next to the
     # search, here on the scenario itself (it is no finer than the coarse search resolution)
     real = rep["fit"]["realisation"]

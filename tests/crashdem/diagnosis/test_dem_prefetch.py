@@ -92,3 +92,18 @@ def test_prefetched_truths_are_the_cases_truths(tmp_path):
             np.testing.assert_array_equal(a.recording[k].data, b.recording[k].data)
             np.testing.assert_array_equal(a.recording[k].t, b.recording[k].t)
         assert a.truth == b.truth
+
+
+def test_workers_started_earlier_follow_the_callers_cache(tmp_path, monkeypatch):
+    """Workers keep the environment they started with; the cache they write is the caller's
+    of now (``$CRASHDEM_CACHE`` changed after they started)."""
+    from crashdem.diagnosis import parallel
+
+    parallel.map_processes(abs, [1, -2], 2)  # the pool of two is running
+    new = _cache(tmp_path, "moved")
+    monkeypatch.setenv("CRASHDEM_CACHE", str(new))
+    sim = gd.DemFullSimulator(workers=2)
+    reqs = [(sim._run_overrides(ov), True) for ov in BATCH[:2]]
+    assert gd.prefetch(reqs, workers=2) == 2
+    assert all(gd._cache_file(ov, f, None).exists() for ov, f in reqs)
+    assert all(gd._cache_file(ov, f, None).parent.parent == new for ov, f in reqs)
