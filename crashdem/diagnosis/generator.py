@@ -234,26 +234,24 @@ def baseline(base: RomParams = RomParams(), settings: RomSettings = RomSettings(
     return simulate(base, settings)
 
 
-
 def _diagnosed_case(job: tuple[int, str | None, dict[str, float] | None]):
     """Worker of ``diagnose_cases``: one case generated and diagnosed, with the seconds the
     diagnosis took."""
     import time
 
     from crashdem.diagnosis import diagnose
-    from crashdem.diagnosis.rom import simulate
 
     seed, effect, recal = job
     case = concealed_case(seed, effect, recalibration=recal)
     t0 = time.perf_counter()
-    rep = diagnose(simulate(RomParams()), case.recording)
+    rep = diagnose(baseline(), case.recording)
     return case, rep, time.perf_counter() - t0
 
 
 def diagnose_cases(cases, workers: int | None = None) -> list:
     """``(case, report, seconds)`` of each ``(seed, effect[, recalibration])`` of ``cases``:
     ``concealed_case`` diagnosed by ``diagnose`` against the default ROM baseline
-    (``simulate(RomParams())``), the cases spread over ``workers`` processes
+    (``baseline()``), the cases spread over ``workers`` processes
     (``parallel.map_processes``; the same reports as one by one, in the order of ``cases``)."""
     from crashdem.diagnosis.parallel import map_processes
 

@@ -271,7 +271,7 @@ def prefetch(requests: list[tuple[dict[str, Any], bool]], *, cache: Path | None 
     seen: set[Path] = set()
     jobs = []
     for ov, filtered in requests:
-        f = _cache_file(ov, filtered, cache)
+        f = _cache_file(ov, filtered, root)
         if f in seen or f.exists():
             continue
         seen.add(f)

@@ -93,7 +93,7 @@ def _shutdown() -> None:
 
 def _pool(n: int) -> concurrent.futures.ProcessPoolExecutor:
     pool = _POOLS.get(n)
-    if pool is None or getattr(pool, "_broken", False):
+    if pool is None or getattr(pool, "_broken", False):  # a worker died (killed, out of memory)
         pool = concurrent.futures.ProcessPoolExecutor(
             max_workers=n, mp_context=multiprocessing.get_context("spawn"))
         _POOLS[n] = pool
@@ -105,8 +105,8 @@ def map_processes(fn: Callable[[Any], T], items: Iterable[Any], workers: int | N
     """``[fn(x) for x in items]`` on ``min(workers, len(items))`` worker processes, in the order
     of ``items`` (in this process when that is one). ``fn`` must be importable by name (a
     module-level function) and its arguments and results picklable. An exception of ``fn`` is
-    raised here (the first in ``items`` order, after every item has finished), or returned in
-    its place with ``return_exceptions``."""
+    raised here (the first in ``items`` order; on workers after every item has finished), or
+    returned in its place with ``return_exceptions``."""
     items = list(items)
     n = min(check_workers(workers), len(items))
     if n < 2:
@@ -128,8 +128,6 @@ def map_processes(fn: Callable[[Any], T], items: Iterable[Any], workers: int | N
             out.append(fut.result())
         except Exception as e:  # noqa: BLE001 - returned or raised below
             out.append(e)
-    if getattr(pool, "_broken", False):  # a worker died (killed, out of memory): start afresh
-        _POOLS.pop(n, None)
     if not return_exceptions:
         for x in out:
             if isinstance(x, BaseException):
