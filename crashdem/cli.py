@@ -160,6 +160,14 @@ def build_parser() -> argparse.ArgumentParser:
                         "~/.cache/crashdem/packings; beds are kept under the soil engine's code "
                         "fingerprint and found by their spec's hash, so the results are the same "
                         "as with fresh beds); off = in OUT only")
+    d.add_argument("--run-cache", default=None, metavar="DIR|off",
+                   help="keep every finished full run (baseline, replicates, search levels, "
+                        "confirmations) in this cache and take a run from it instead of running "
+                        "it again: diagnoses of one scenario share all but their confirmation "
+                        "runs (default: $CRASHDEM_CACHE/runs or ~/.cache/crashdem/runs; runs "
+                        "are kept under the code's fingerprint and found by the hash of what "
+                        "decides their signals, so the results are those of a fresh run); off = "
+                        "run everything")
     d.add_argument("--baseline", choices=("run", "result", "rom"), default="run",
                    help="baseline simulation: the scenario's full result, run now when missing "
                         "(run, default); the existing result only (result); the reduced-order "

@@ -358,6 +358,8 @@ class RunMember:
     threads : Numba threads per member (``scenario.threads``, >= 0, 0 = all cores); 1 matches
         one member per single-threaded worker process; None keeps the scenario's value
     snapshots : keep the scenario's particle snapshots (False sets ``output.snapshots = 0``)
+    run_cache : a ``crashdem.runcache.RunCache`` the runs are taken from when made before and
+        kept in (None: every member is run)
 
     Notes
     -----
@@ -368,6 +370,7 @@ class RunMember:
 
     threads: int | None = 1
     snapshots: bool = False
+    run_cache: Any = None
 
     def __post_init__(self) -> None:
         if self.threads is not None and not (isinstance(self.threads, int)
@@ -379,17 +382,24 @@ class RunMember:
 
         if member.scenario is None:
             raise ValueError(f"member {member.index}: RunMember needs a scenario")
-        ov: dict[str, Any] = {"scenario.name": f"member-{member.key}", "output.plots": False}
+        scen = self.member_scenario(member.scenario, f"member-{member.key}")
+        path = Path(path)
+        # the run takes its bed from ``path.parent/packings``; members sharing it deposit each
+        # bed once (``soil.packing.cached`` holds a lock while it deposits)
+        if self.run_cache is not None:
+            out = self.run_cache.run(scen, path.parent, plots=False)
+        else:
+            out = run_scenario(scen, out_dir=path.parent, progress=False, plots=False)
+        os.replace(out, path)
+
+    def member_scenario(self, scenario: Scenario, name: str = "member") -> Scenario:
+        """The scenario this function runs for a member of ``scenario`` (named ``name``)."""
+        ov: dict[str, Any] = {"scenario.name": name, "output.plots": False}
         if self.threads is not None:
             ov["scenario.threads"] = self.threads
         if not self.snapshots:
             ov["output.snapshots"] = 0
-        scen = member.scenario.with_overrides(ov)
-        path = Path(path)
-        # the run takes its bed from ``path.parent/packings``; members sharing it deposit each
-        # bed once (``soil.packing.cached`` holds a lock while it deposits)
-        out = run_scenario(scen, out_dir=path.parent, progress=False, plots=False)
-        os.replace(out, path)
+        return scenario.with_overrides(ov)
 
 
 @dataclass(frozen=True, repr=False)

@@ -201,6 +201,18 @@ def _attr_value(v: Any) -> Any:
     return v
 
 
+def write_scenario_group(f: h5py.File, scenario_toml: str | None, source_toml: str,
+                         parameters: Mapping[str, Any] | None) -> None:
+    """Write ``/scenario`` of a result: the full scenario text (``config_toml``), the text it
+    was loaded from (``source_toml``) and the parsed scenario (``parameters``)."""
+    sc = f.create_group("scenario")
+    sc.create_dataset("config_toml", data=scenario_toml or "", dtype=h5py.string_dtype())
+    sc["config_toml"].attrs["unit"] = "1"
+    sc.create_dataset("source_toml", data=source_toml, dtype=h5py.string_dtype())
+    sc["source_toml"].attrs["unit"] = "1"
+    _write_params(sc.create_group("parameters"), parameters or {})
+
+
 def _read_params(group: h5py.Group) -> dict[str, Any]:
     out: dict[str, Any] = {}
     lists = {k[: -len(".__list__")] for k in group.attrs if k.endswith(".__list__")}
@@ -353,12 +365,7 @@ class ResultWriter:
         f.attrs["wall_time.unit"] = "s"
         for k, v in provenance(seed, threads).items():
             f.attrs[k] = v
-        sc = f.create_group("scenario")
-        sc.create_dataset("config_toml", data=scenario_toml or "", dtype=h5py.string_dtype())
-        sc["config_toml"].attrs["unit"] = "1"
-        sc.create_dataset("source_toml", data=source_toml, dtype=h5py.string_dtype())
-        sc["source_toml"].attrs["unit"] = "1"
-        _write_params(sc.create_group("parameters"), parameters or {})
+        write_scenario_group(f, scenario_toml, source_toml, parameters)
         f.create_group("channels", track_order=True)
         f.flush()
 

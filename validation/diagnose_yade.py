@@ -227,6 +227,7 @@ def cli_case(effect: str | None, seed: int, out: str | Path, scenario: str | Pat
             "search_best": fit.get("full_search", {}).get("best", {}),
             "how": sims.get("full_search"),
             "beds_deposited": (sims.get("packing_cache") or {}).get("beds_deposited"),
+            "runs_from_cache": (sims.get("run_cache") or {}).get("hits"),
             "grains": case.meta["grains"], "yade_dt_s": case.meta["dt"],
             "case_wall_s": t1 - t0, "diagnosis_wall_s": t2 - t1, "decision": rep["decision"],
             "out": str(d / "out")}

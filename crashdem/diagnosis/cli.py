@@ -301,6 +301,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
     from crashdem import scenario as sc
     from crashdem.diagnosis import diagnose, screen_then_confirm, working_rate, write_report
     from crashdem.recordings import read_recording
+    from crashdem.runcache import from_option as run_cache_option
 
     overrides = dict(sc.parse_override(s) for s in (getattr(args, "set", None) or []))
     scen = sc.load(args.scenario, overrides)
@@ -336,6 +337,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                            t_end=float(first.t[-1]) + 0.01, sample_rate=first.fs,
                            cfc=first.cfc if first.cfc is not None else scen.get("instrumentation.cfc"))
     pcache = _packing_cache(getattr(args, "packing_cache", None))
+    rcache = run_cache_option(getattr(args, "run_cache", None))
     # the beds already in each directory runs deposit in (the count of report.json)
     own = (pcache if pcache is not None else Path(args.out) / "baseline" / "packings").resolve()
     beds_before = {own: _cached_beds(own)}
@@ -344,7 +346,8 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         _one_bed(scen, None, args)  # options that would repeat the one bed, before any run
     baseline, source = _baseline(scen, cmap, base_params, settings,
                                  mode=getattr(args, "baseline", None) or "run",
-                                 out_dir=Path(args.out), packing_cache=pcache)
+                                 out_dir=Path(args.out), packing_cache=pcache,
+                                 run_cache=rcache)
     # unfiltered baseline channels, to compare at a recording's other filter class
     base_raw = (_simulate(base_params, replace(settings, cfc=None)) if source == "rom"
                 else _baseline_raw(source, cmap))
@@ -362,17 +365,17 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                                             else "full_runs")], pcache)
         if linked is not None and linked not in beds_before:  # a result's own beds
             beds_before[linked] = _cached_beds(linked)
-        full = _local_runner(scen, cmap, Path(args.out) / "full_runs")
+        full = _local_runner(scen, cmap, Path(args.out) / "full_runs", rcache)
         if getattr(args, "workers", None) != 0:  # Dask: LocalCluster, or --scheduler ADDRESS
             from crashdem.diagnosis.distributed import full_simulator_from_args
 
             local = full
-            full = _LocalFallback(full_simulator_from_args(args, scen, cmap), local,  # type: ignore[assignment]
+            full = _LocalFallback(full_simulator_from_args(args, scen, cmap, rcache), local,  # type: ignore[assignment]
                                   lambda: _share_packings(source, [Path(args.out) / "full_runs"],
                                                           pcache))
         searched, search_sim, search_how = _search_setup(
             scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out),
-            packing_cache=pcache)
+            packing_cache=pcache, run_cache=rcache)
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
         level_beds = _level_beds(getattr(args, "level_beds", None))
@@ -393,6 +396,8 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         rep = diagnose(baseline, rec, rom_base=base_params, calibrate_to_baseline=source != "rom",
                        baseline_raw=base_raw, **cat_kw)
     rep.simulations["baseline_source"] = source
+    rep.simulations["run_cache"] = rcache.describe() if rcache is not None else {
+        "directory": "off"}
     rep.simulations["packing_cache"] = {
         "directory": "off" if pcache is None else str(own),
         "beds_deposited": sum(len(_cached_beds(d) - b) for d, b in beds_before.items()),
@@ -632,7 +637,8 @@ IMPORTED_BED_FORM = "stiffness"
 
 
 def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path,
-                  packing_cache: Path | None = None) -> tuple[dict[str, Any], Any, str]:
+                  packing_cache: Path | None = None, run_cache: Any = None
+                  ) -> tuple[dict[str, Any], Any, str]:
     """The full-model search of ``crashdem diagnose`` (``--full-search``): the effects searched
     (the drop catalogue's ``full_search`` minus the physics the scenario already has switched
     on), the simulator it runs on (None: the full simulator) and a one-line description.
@@ -644,7 +650,8 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     coarse runs instead of full ones: at the default resolution, 16,300 grains, one full run
     takes about two minutes); ``full`` always on the scenario; ``coarse`` always coarse;
     ``off`` none. The coarse runs deposit their beds in ``packing_cache`` when given
-    (``_packing_cache``), else in ``out/search_runs/packings``."""
+    (``_packing_cache``), else in ``out/search_runs/packings``, and are kept in / taken from
+    ``run_cache`` (``crashdem.runcache.RunCache``) when given."""
     from crashdem.diagnosis.catalogue import DROP
 
     if mode not in ("auto", "full", "coarse", "off"):
@@ -684,7 +691,7 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                 else f"a small bed: about {bed_grains(scen):,.0f} grains")
         return searched, None, (f"{len(searched)} effects on the scenario itself ({what}, load "
                                 f"{load:,.0f} <= {AUTO_FULL_LOAD:,}){note}")
-    search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs")
+    search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs", run_cache)
     if packing_cache is not None:
         from crashdem.run import share_packings
 
@@ -697,16 +704,19 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                                  "the scenario's only)" if bed is not None else "") + note)
 
 
-def _local_runner(scen, cmap: dict[str, str], out_dir: Path):
+def _local_runner(scen, cmap: dict[str, str], out_dir: Path, run_cache: Any = None):
     """``f(overrides) -> channels``: ``scen`` with a hypothesis's overrides
     (``distributed.scenario_overrides``: ``calibration.*`` factors made absolute) run in this
-    process into ``out_dir``, its diagnosed channels read back (``_result_channels``)."""
+    process into ``out_dir``, its diagnosed channels read back (``_result_channels``); with a
+    ``run_cache`` (``crashdem.runcache.RunCache``) a run made before is read from the cache
+    and a new one kept there (the runs are read, not kept in ``out_dir``)."""
     def run(ov: dict[str, Any]) -> dict[str, Signal]:
         from crashdem.diagnosis.distributed import scenario_overrides
         from crashdem.run import run_scenario
 
-        path = run_scenario(scen.with_overrides(scenario_overrides(scen, ov)), out_dir=out_dir,
-                            progress=False)
+        s = scen.with_overrides(scenario_overrides(scen, ov))
+        path = (run_scenario(s, out_dir=out_dir, progress=False) if run_cache is None
+                else run_cache.run(s, out_dir, keep=False))
         return {k: v for k, v in _result_channels(path, cmap).items() if v is not None}
 
     return run
@@ -832,7 +842,8 @@ def _simulate(params: RomParams | PlanarParams, settings: RomSettings) -> dict[s
 def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
               settings: RomSettings,
               mode: str = "run", out_dir: Path | None = None,
-              packing_cache: Path | None = None) -> tuple[dict[str, Signal], str]:
+              packing_cache: Path | None = None, run_cache: Any = None
+              ) -> tuple[dict[str, Signal], str]:
     """The baseline simulation the recording is compared with.
 
     ``mode``:
@@ -846,7 +857,8 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
         differences of another code are not separated from missing physics).
 
     A run made here deposits its bed in ``packing_cache`` when given, else in
-    ``out_dir/baseline/packings``.
+    ``out_dir/baseline/packings``; with a ``run_cache`` (``crashdem.runcache.RunCache``) the
+    run is taken from it when made before (copied to ``out_dir/baseline``) and kept there.
     """
     if mode not in ("run", "result", "rom"):
         raise ValueError(f"--baseline={mode!r}: must be one of 'run', 'result', 'rom'")
@@ -871,8 +883,9 @@ def _baseline(scen, cmap: dict[str, str], rom_params: RomParams | PlanarParams,
         from crashdem.run import share_packings
 
         share_packings(out, packing_cache)
-    path = run_scenario(scen.with_overrides({"output.snapshots": 0}), out_dir=out,
-                        progress=False, plots=False)
+    base = scen.with_overrides({"output.snapshots": 0})
+    path = (run_scenario(base, out_dir=out, progress=False, plots=False) if run_cache is None
+            else run_cache.run(base, out, plots=False))
     got = channels(path)
     if got is None:
         raise ValueError(f"diagnose: the baseline run {path} has none of the diagnosed channels "

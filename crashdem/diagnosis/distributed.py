@@ -99,6 +99,8 @@ class DaskFullSimulator:
     member_fn : ``member_fn(member, path)`` writing one crashdem result (default
         ``crashdem.ensemble.RunMember(threads=member_threads)``: a full ``crashdem.run`` run)
     member_threads : Numba threads per run of the default member function, >= 0
+    run_cache : ``crashdem.runcache.RunCache`` of the default member function (runs made
+        before are taken from it, new ones kept there; its ``hits`` / ``runs`` count them)
     cluster : crashdem.ensemble.ClusterSettings
         LocalCluster (default) or ``scheduler`` address; ``retries``.
     client : an existing ``distributed.Client`` (then ``cluster`` only gives ``retries``)
@@ -117,7 +119,7 @@ class DaskFullSimulator:
                  member_fn: Callable[[Any, Path], None] | None = None, member_threads: int = 1,
                  cluster: Any = None, client: Any = None,
                  work_dir: str | os.PathLike | None = None, keep_members: bool = False,
-                 transfer: bool = False, filtered: bool = True) -> None:
+                 transfer: bool = False, filtered: bool = True, run_cache: Any = None) -> None:
         from crashdem import ensemble as en
 
         if scenario is None:
@@ -129,7 +131,10 @@ class DaskFullSimulator:
             raise ValueError(f"DaskFullSimulator.out={str(out)!r}: must be an .h5 file")
         self.channel_map = dict(channel_map) if channel_map is not None else None
         self.member_fn = member_fn if member_fn is not None else en.RunMember(
-            threads=member_threads)
+            threads=member_threads, run_cache=run_cache)
+        # the cache the members use, when they say which scenario they run (to count its hits)
+        self.run_cache = (getattr(self.member_fn, "run_cache", None)
+                          if hasattr(self.member_fn, "member_scenario") else None)
         self.cluster = cluster if cluster is not None else en.ClusterSettings()
         self.client = client
         self.work_dir = work_dir
@@ -159,6 +164,10 @@ class DaskFullSimulator:
         overrides = [dict(o) for o in overrides]
         fields = [scenario_overrides(self.scenario, o) for o in overrides]
         path = self._next_path()
+        cached = 0
+        if self.run_cache is not None:  # those the members will take from the cache
+            cached = sum(self.run_cache.lookup(self.member_fn.member_scenario(
+                self.scenario.with_overrides(f))) is not None for f in fields)
         spec = {"purpose": "diagnosis full-simulation confirmation",
                 "hypothesis_overrides": overrides, "overrides": fields}
         wd = self.work_dir
@@ -171,6 +180,9 @@ class DaskFullSimulator:
         self.ensembles.append(path)
         self.outcomes.extend(outcomes)
         self.calls += len(outcomes)
+        if self.run_cache is not None:
+            self.run_cache.hits += cached
+            self.run_cache.runs += len(outcomes) - cached
         failed = [o for o in outcomes if o.status != "complete"]
         if failed:
             lines = "; ".join(f"member {o.index} ({en._fmt_overrides(fields[o.index])}): "
@@ -249,11 +261,11 @@ def distributed_confirm(baseline_signals: Mapping[str, Signal],
     return rep
 
 
-def full_simulator_from_args(args: Any, scenario: Any, channel_map: Mapping[str, str]
-                             ) -> DaskFullSimulator:
+def full_simulator_from_args(args: Any, scenario: Any, channel_map: Mapping[str, str],
+                             run_cache: Any = None) -> DaskFullSimulator:
     """The confirmation simulator of ``crashdem diagnose --full-confirm N``: a LocalCluster of
     ``--workers`` processes (default: cores) or the cluster at ``--scheduler``; the runs are
-    gathered in ``OUT/confirmation.h5``."""
+    gathered in ``OUT/confirmation.h5`` (and kept in / taken from ``run_cache``)."""
     from crashdem import ensemble as en
 
     workers = getattr(args, "workers", None)
@@ -269,4 +281,5 @@ def full_simulator_from_args(args: Any, scenario: Any, channel_map: Mapping[str,
     return DaskFullSimulator(scenario, Path(args.out) / "confirmation.h5",
                              channel_map=channel_map, member_threads=threads, cluster=cluster,
                              work_dir=getattr(args, "work_dir", None),
-                             keep_members=bool(getattr(args, "keep_members", False)))
+                             keep_members=bool(getattr(args, "keep_members", False)),
+                             run_cache=run_cache)

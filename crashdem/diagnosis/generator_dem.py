@@ -37,7 +37,6 @@ factor) and the contact restitution (the ROM's is a bulk soil-spring dashpot).
 """
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -49,6 +48,10 @@ from typing import Any
 import numpy as np
 
 from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
+# the sources a cached run is keyed by, and the crashdem modules they import that do not shape a
+# run (``crashdem.runcache``, which also keeps the finished result files)
+from crashdem.runcache import CODE as _CODE, OUTPUT_ONLY as _OUTPUT_ONLY, _ROOT  # noqa: F401
+from crashdem.runcache import source_digest as _code_fingerprint
 from crashdem.signal import Signal
 
 __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_NUMERICS", "impact_speed",
@@ -181,33 +184,6 @@ def draw_dem_effect(effect: str, rng: np.random.Generator) -> dict[str, Any]:
     return out
 
 
-#: sources whose change invalidates cached runs (the DEM, the body, the coupling, the run and
-#: the modules of crashdem it builds a run from; ``beds`` places an imported bed and its layer)
-_ROOT = Path(__file__).resolve().parents[2]
-_CODE = ("soil", "bodies", "coupling", "crashdem/run.py", "crashdem/sensors.py",
-         "crashdem/scenario.py", "crashdem/filters.py", "crashdem/beds.py", "crashdem/signal.py",
-         "crashdem/glider.py")
-#: modules of crashdem that the keyed ones import but that do not shape a run's signals: they
-#: write, checkpoint, plot, export and report it, or check a channel's ISO code (``tests``: every
-#: other module they import is in ``_CODE``)
-_OUTPUT_ONLY = ("checkpoint", "progress", "results", "plotting", "export", "isomme")
-
-
-@functools.lru_cache(maxsize=1)
-def _code_fingerprint() -> bytes:
-    """Hash of the simulation sources (read once per process: the imported code cannot change
-    under a running process)."""
-    h = hashlib.sha256()
-    for rel in _CODE:
-        p = _ROOT / rel
-        files = sorted(p.rglob("*.py")) if p.is_dir() else [p]
-        for f in files:
-            if f.exists():
-                h.update(str(f.relative_to(_ROOT)).encode())
-                h.update(f.read_bytes())
-    return h.digest()
-
-
 def _key(overrides: dict[str, Any]) -> str:
     """Cache key: scenario file, overrides and the sources of the simulation code."""
     h = hashlib.sha256()
@@ -316,7 +292,7 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
         except (OSError, KeyError, ValueError):
             pass
     from crashdem.results import open_result
-    from crashdem.run import run_scenario, share_packings
+    from crashdem.run import share_packings
 
     # one run directory per process: two processes asking for the same run on a cold cache
     # would otherwise collide on its HDF5 file (measured: an HDF5 lock error stopped one of two
@@ -326,7 +302,11 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
     share_packings(runs, root / "packings")
     ov["scenario.name"] = f"diag_{key}"
     scen = sc.load(SCENARIO, ov)
-    path = run_scenario(scen, out_dir=runs, progress=False)
+    # the result file goes to the run cache (``crashdem.runcache``): the raw and the filtered
+    # request of one run, and a ``crashdem diagnose`` of the same scenario, read it there
+    from crashdem.runcache import RunCache
+
+    path = RunCache(root / "runs").run(scen, runs, keep=False)
     import h5py
 
     with h5py.File(path, "r") as h:
@@ -346,10 +326,6 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
              **{n: s.data for n, s in sigs.items()},
              **{f"{n}__unit": np.array(s.unit) for n, s in sigs.items()})
     os.replace(tmp, f)
-    try:  # the npz holds what is needed; keep the cache small
-        path.unlink()
-    except OSError:
-        pass
     return sigs, info
 
 

@@ -289,6 +289,11 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                   + (f" in the packing cache {pc['directory']} (shared with later diagnoses of "
                      f"this scenario)" if pc["directory"] != "off" else " (packing cache off)")
                   + ".", ""]
+    rc = sims.get("run_cache")
+    if isinstance(rc, dict):
+        lines += [(f"Full runs: {rc['runs']} made, {rc['hits']} taken from the run cache "
+                   f"{rc['directory']} (runs of the same scenario and code made before, bit for "
+                   f"bit).") if rc["directory"] != "off" else "Full runs: run cache off.", ""]
     if plots:
         lines += ["## Plots", ""] + [f"![{Path(p).stem}]({Path(p).name})" for p in plots] + [""]
     return "\n".join(lines)

@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import time
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -519,7 +520,10 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     from the cache gives the run a freshly deposited one gives; with ``off`` the beds are
     deposited again in OUT and give the same again;
     the default is the user's cache (``$CRASHDEM_CACHE/packings``). Measured on a 13.7 m Yade
-    recording on the small bed (docs/diagnosis.md): 62 beds and 305 s, then 0 and 99 s."""
+    recording on the small bed (docs/diagnosis.md): 62 beds and 305 s, then 0 and 99 s.
+    The first diagnosis also keeps its runs in a ``--run-cache``, the two next run theirs
+    (``off``); a fourth with the first's run cache runs none -- every run, the baseline
+    included, is taken from it -- and gives the same answer and scores again."""
     import json
 
     from crashdem import cli
@@ -527,6 +531,7 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     from crashdem.diagnosis.cli import _packing_cache
     from crashdem.diagnosis.report import without_wall_times
     from crashdem.recordings import write_recording
+    from crashdem.results import open_result
     from crashdem.run import packing_cache
     from soil.packing import code_fingerprint
 
@@ -545,16 +550,21 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     sets = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in {
         **gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS, "scenario.name": "cache_baseline"}.items()]
 
-    def run(out, where=str(cache)):
+    runs = tmp_path / "runs"
+
+    def run(out, where=str(cache), run_cache="off"):
         argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
                 "--out", str(out), "--workers", "0", "--full-search", "off",
-                "--full-confirm", "2", "--packing-cache", where]
+                "--full-confirm", "2", "--packing-cache", where, "--run-cache", run_cache]
         for s in sets:
             argv += ["--set", s]
         assert cli.main(argv) == 0
         return json.loads((out / "report.json").read_text())
 
-    first, second = run(tmp_path / "a"), run(tmp_path / "b")
+    first, second = run(tmp_path / "a", run_cache=str(runs)), run(tmp_path / "b")
+    made = first["simulations"]["run_cache"]
+    assert made["hits"] == 0 and made["runs"] == 1 + first["simulations"]["full_simulations"]
+    assert second["simulations"]["run_cache"] == {"directory": "off"}
     beds = sorted((cache / code_fingerprint()).glob("packing-*.h5"))
     here = str((cache / code_fingerprint()).resolve())
     assert first["simulations"]["packing_cache"] == {
@@ -580,7 +590,20 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     assert len(list(own.glob("*.h5"))) == len(beds)
     assert without_wall_times(third["hypotheses"]) == without_wall_times(first["hypotheses"])
     assert third["fit"]["before"] == first["fit"]["before"]
-    assert not (tmp_path / "user").exists()  # the default cache was not used
+    # the first diagnosis's run cache: nothing run, nothing deposited, the same again
+    fourth = run(tmp_path / "d", "off", str(runs))
+    assert fourth["simulations"]["run_cache"] == {**made, "hits": made["runs"], "runs": 0}
+    assert fourth["simulations"]["packing_cache"]["beds_deposited"] == 0
+    assert "taken from the run cache" in (tmp_path / "d" / "report.md").read_text()
+    assert without_wall_times(fourth["hypotheses"]) == without_wall_times(first["hypotheses"])
+    assert [r["score"] for r in fourth["fit"]["confirmation"]] == [
+        r["score"] for r in first["fit"]["confirmation"]]
+    assert fourth["fit"]["before"] == first["fit"]["before"]
+    base = Path(fourth["simulations"]["baseline_source"].split(" ", 2)[2])
+    assert base.parent == tmp_path / "d" / "baseline"
+    with open_result(base) as res:
+        assert res.complete and res.parameters["scenario"]["name"] == "cache_baseline"
+    assert not (tmp_path / "user").exists()  # the default caches were not used
 
 
 def test_cli_runs_the_baseline_dem_itself(tmp_path):

@@ -174,7 +174,7 @@ class FakeRunMember:
     """Stands in for ``crashdem.ensemble.RunMember`` in the CLI test: the truth numerics of the
     member's scenario instead of a DEM run (same constructor)."""
 
-    def __init__(self, threads=1, snapshots=False) -> None:
+    def __init__(self, threads=1, snapshots=False, run_cache=None) -> None:
         self.threads = threads
 
     def __repr__(self) -> str:
