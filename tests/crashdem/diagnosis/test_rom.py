@@ -97,6 +97,35 @@ def test_lowpass_form_resonant_gain(fn, zeta):
         assert amp == pytest.approx(1.0 / (2.0 * zeta), rel=0.02 if f is _dsp.mount_filter_exact else 0.01)
 
 
+def test_mount_design_is_made_once_and_is_the_fresh_design():
+    """The screening fits filter thousands of model runs through one mount: its (b, a) and
+    steady state are designed once per (dt, fn, zeta, form) (``_dsp._mount_design``), read-only,
+    and the filtered record equals, bit for bit, the one of a design made afresh (scipy's
+    ``bilinear`` and ``lfilter_zi``), from rest (first sample 0) and from a steady first
+    sample."""
+    from scipy import signal as sps
+
+    dt, fn, zeta = 1.0 / 12500.0, 173.2, 0.31
+    rng = np.random.default_rng(3)
+    x = 9.81 + rng.normal(size=800)
+    _dsp._mount_design.cache_clear()
+    for form in (1.0, 0.0):
+        wp = 2.0 / dt * math.tan(math.pi * fn * dt)
+        b, a = sps.bilinear(_dsp._numerator(form, zeta, wp), [1.0, 2.0 * zeta * wp, wp * wp],
+                            fs=1.0 / dt)
+        fresh = sps.lfilter(b, a, x, zi=sps.lfilter_zi(b, a) * x[0])[0]
+        for _ in range(3):
+            assert np.array_equal(_dsp.mount_filter_bilinear(x, dt, fn, zeta, form), fresh)
+        x0 = np.concatenate([[0.0], x[1:]])
+        assert np.array_equal(_dsp.mount_filter_bilinear(x0, dt, fn, zeta, form),
+                              sps.lfilter(b, a, x0))
+    info = _dsp._mount_design.cache_info()
+    assert (info.misses, info.hits) == (2, 6)
+    b, _, _ = _dsp._mount_design(dt, fn, zeta, 1.0)
+    with pytest.raises(ValueError, match="read-only"):
+        b[0] = 1.0
+
+
 @pytest.mark.parametrize("model, form", [("mount", 1.0), ("lowpass", 0.0)])
 def test_rom_mount_forms_equal_the_run_sensor_models(model, form):
     """Oracle: two independent exact discretisations of the same transfer function -- the
