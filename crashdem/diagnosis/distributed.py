@@ -164,10 +164,7 @@ class DaskFullSimulator:
         overrides = [dict(o) for o in overrides]
         fields = [scenario_overrides(self.scenario, o) for o in overrides]
         path = self._next_path()
-        cached = 0
-        if self.run_cache is not None:  # those the members will take from the cache
-            cached = sum(self.run_cache.lookup(self.member_fn.member_scenario(
-                self.scenario.with_overrides(f))) is not None for f in fields)
+        cached = sum(self._cached(f) for f in fields)  # runs the members take from the cache
         spec = {"purpose": "diagnosis full-simulation confirmation",
                 "hypothesis_overrides": overrides, "overrides": fields}
         wd = self.work_dir
@@ -204,6 +201,17 @@ class DaskFullSimulator:
                         got[new] = _renamed(ens.channel(o.index, src, filtered=self.filtered), new)
                 out.append(got)
         return out
+
+    def _cached(self, fields: Mapping[str, Any]) -> bool:
+        """Whether the member of scenario fields ``fields`` is in the run cache (False without
+        one, or for fields the scenario refuses: ``map_overrides`` then names them)."""
+        if self.run_cache is None:
+            return False
+        try:
+            scen = self.member_fn.member_scenario(self.scenario.with_overrides(dict(fields)))
+        except Exception:  # noqa: BLE001 - refused later, with the member named
+            return False
+        return self.run_cache.lookup(scen) is not None
 
     def __call__(self, overrides: Mapping[str, Any]) -> dict[str, Signal]:
         return self.map([overrides])[0]
