@@ -58,7 +58,7 @@ __all__ = ["DemConcealedCase", "DEM_EFFECT_DRAWS", "BASE_OVERRIDES", "BASELINE_N
            "replicates", "use_scenario",
            "COMPARED", "dem_concealed_case", "dem_baseline", "run_dem", "scenario_path",
            "cache_dir", "dem_filter_class_case", "dem_baseline_raw", "FILTER_CLASS_DRAWS",
-           "prefetch", "prefetch_cases"]
+           "prefetch", "prefetch_cases", "diagnose_cases"]
 
 #: the drop-test scenario of the truth and baseline
 SCENARIO = Path(__file__).resolve().parents[2] / "validation" / "scenarios" / "drop_s2_h13p70.toml"
@@ -266,6 +266,59 @@ def prefetch_cases(cases: list[tuple[int, str | None]], *, cache: Path | None = 
     jobs = [("case", str(SCENARIO), (int(seed), effect, root)) for seed, effect in cases
             if not _cache_file(_truth_draws(int(seed), effect, {})[2], False, root).exists()]
     return _fan_out(jobs, workers)
+
+
+def _diagnose_dem_case(seed: int, effect: str | None, root: Path, top_k: int,
+                       workers: int | None) -> tuple:
+    """``(case, report, generation s, diagnosis s)`` of one DEM-truth case, its confirmation
+    batches run on ``workers`` processes (``DemFullSimulator``)."""
+    import time
+
+    from crashdem.diagnosis import screen_then_confirm
+
+    t0 = time.perf_counter()
+    case = dem_concealed_case(seed, effect, cache=root)
+    t1 = time.perf_counter()
+    rep = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(root, workers),
+                              top_k=top_k, impact_speed=impact_speed(), replicates=replicates())
+    return case, rep, t1 - t0, time.perf_counter() - t1
+
+
+def _diagnosed_dem_case(job: tuple[int, str | None, str, Path, int]) -> tuple:
+    """Worker side of ``diagnose_cases``: one case, its runs made in this process (one
+    worker: no pool inside a pool)."""
+    seed, effect, scenario, root, top_k = job
+    if Path(scenario).resolve() != SCENARIO:
+        use_scenario(scenario)
+    return _diagnose_dem_case(seed, effect, root, top_k, 1)
+
+
+def diagnose_cases(cases: list[tuple[int, str | None]], *, top_k: int = 2,
+                   cache: Path | None = None, workers: int | None = None) -> list[tuple]:
+    """``(case, report, generation s, diagnosis s)`` of each DEM-truth case ``(seed, effect)``
+    of ``cases``, in order: ``dem_concealed_case`` diagnosed by ``screen_then_confirm`` with the
+    full-DEM confirmation (``DemFullSimulator``), the replicate packings (``replicates()``) and
+    the full-model search, as the library path does.
+
+    The truths run first, one per worker (``prefetch_cases``). The first case is diagnosed
+    here, its batches of runs on the workers (``DemFullSimulator.map``): it makes the runs
+    every case shares (the baseline's replicates, the search levels on their beds). The others
+    are then diagnosed one per worker, each making only its own runs (confirmations,
+    refinements, the numerics check) and reading the shared ones from the cache. Every run is
+    the same deterministic single-threaded run wherever it executes, so the reports do not
+    depend on ``workers`` (but for their wall times)."""
+    from crashdem.diagnosis.parallel import check_workers, map_processes
+
+    cases = [(int(seed), effect) for seed, effect in cases]
+    if not cases:
+        return []
+    prefetch_cases(cases, cache=cache, workers=workers)
+    root = _resolved(cache)
+    out = [_diagnose_dem_case(*cases[0], root, top_k, workers)]
+    jobs = [(seed, effect, str(SCENARIO), root, top_k) for seed, effect in cases[1:]]
+    if min(check_workers(workers), len(jobs)) < 2:
+        return out + [_diagnosed_dem_case(j) for j in jobs]
+    return out + map_processes(_diagnosed_dem_case, jobs, workers)
 
 
 def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = None

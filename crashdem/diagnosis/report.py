@@ -36,11 +36,11 @@ def _clean(x: Any) -> Any:
 
 
 def without_wall_times(x: Any) -> Any:
-    """Report JSON (or a part of it) without its wall times (keys ``wall_time_s`` and
-    ``*_wall_s``): what two diagnoses of the same inputs must agree on."""
+    """Report JSON (or a part of it) without its wall times (keys ``wall_time_s``,
+    ``*_wall_time_s`` and ``*_wall_s``): what two diagnoses of the same inputs must agree on."""
     if isinstance(x, dict):
         return {k: without_wall_times(v) for k, v in x.items()
-                if k != "wall_time_s" and not k.endswith("_wall_s")}
+                if not (k.endswith("wall_time_s") or k.endswith("_wall_s"))}
     if isinstance(x, list):
         return [without_wall_times(v) for v in x]
     return x

@@ -31,7 +31,6 @@ progress without hiding the gap.
 """
 from __future__ import annotations
 
-import time
 from collections import Counter
 from pathlib import Path
 
@@ -47,7 +46,8 @@ from crashdem.diagnosis.generator import ACCEPT_SCORE_AFTER as MIN_SCORE_AFTER
 from crashdem.diagnosis.generator import ACCEPT_SCORE_GAIN as MIN_SCORE_GAIN
 from crashdem.diagnosis.generator import ACCEPT_TOP1_RATE as MIN_TOP1_RATE
 from crashdem.diagnosis.generator_dem import (DemFullSimulator, dem_concealed_case, impact_speed,
-                                              prefetch_cases, replicates)
+                                              replicates)
+from crashdem.diagnosis.generator_dem import diagnose_cases as diagnose_dem_cases
 
 #: effect types of the DEM truth (structural_crush: not available for the drop sphere)
 EFFECTS = ("soil_layering", "boundary_proximity", "initial_conditions", "sensor_dynamics",
@@ -73,17 +73,10 @@ GAP = ("DEM truth, measured with the full-model search (session 21, 2026-12-01):
 
 @pytest.fixture(scope="session")
 def dem_runs():
-    out = []
     cases = [(e, s) for e in EFFECTS for s in SEEDS] + [(None, s) for s in NULL_SEEDS]
-    prefetch_cases([(s, e) for e, s in cases])  # the truths in parallel (one run per core)
-    for effect, seed in cases:
-        t0 = time.perf_counter()
-        case = dem_concealed_case(seed, effect)
-        t1 = time.perf_counter()
-        full = DemFullSimulator()
-        rep = screen_then_confirm(case.baseline, case.recording, full, top_k=TOP_K,
-                                  impact_speed=impact_speed(), replicates=replicates())
-        out.append((case, rep, t1 - t0, time.perf_counter() - t1))
+    # the truths, then the first case's shared runs, then the other cases, on every core
+    # (generator_dem.diagnose_cases: the same reports as one by one, but the wall times)
+    out = diagnose_dem_cases([(s, e) for e, s in cases], top_k=TOP_K)
     conf = Counter((c.effect or "null", r.missing_physics or "none") for c, r, _, _ in out)
     top = Counter((c.effect or "null", r.hypotheses[0]["name"]) for c, r, _, _ in out)
     print("\nDEM truth -- confusion (truth -> claimed missing physics):")
@@ -113,6 +106,24 @@ def _after(r) -> float:
 
 def _effect_runs(runs):
     return [(c, r) for c, r, _, _ in runs if c.effect is not None]
+
+
+def test_cases_diagnosed_on_workers_equal_one_by_one(dem_runs):
+    """The fixture's cases after the first were diagnosed on worker processes
+    (``generator_dem.diagnose_cases``); diagnosed again here, one by one in this process with
+    its runs from the cache, two of them (an effect and a null) give the same report in every
+    field but the wall times (``report.without_wall_times`` of ``report.json``)."""
+    import json
+
+    from crashdem.diagnosis.report import to_json, without_wall_times
+
+    for case, rep, _, _ in (dem_runs[1], dem_runs[-1]):
+        again = screen_then_confirm(case.baseline, case.recording, DemFullSimulator(workers=1),
+                                    top_k=TOP_K, impact_speed=impact_speed(),
+                                    replicates=replicates())
+        assert without_wall_times(json.loads(to_json(again))) == without_wall_times(
+            json.loads(to_json(rep))), (case.seed, case.effect)
+    assert dem_runs[-1][0].effect is None and dem_runs[1][0].effect is not None
 
 
 def test_generator_truth_differs_in_numerics(dem_runs):
@@ -535,8 +546,8 @@ def test_cli_diagnoses_share_a_packing_cache(tmp_path, monkeypatch):
     from crashdem.run import packing_cache
     from soil.packing import code_fingerprint
 
-    assert without_wall_times({"a": [{"wall_time_s": 1, "b": 2}], "full_wall_s": 3}) == {
-        "a": [{"b": 2}]}
+    assert without_wall_times({"a": [{"wall_time_s": 1, "b": 2}], "full_wall_s": 3,
+                               "full_wall_time_s": 4, "wall": 5}) == {"a": [{"b": 2}], "wall": 5}
 
     case = dem_concealed_case(21, None)  # from the generator's cache, before the next line
     monkeypatch.setenv("CRASHDEM_CACHE", str(tmp_path / "user"))
