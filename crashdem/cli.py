@@ -1,7 +1,7 @@
 """The ``crashdem`` command line.
 
-Subcommands: ``run``, ``info``, ``plot``, ``export``, ``diagnose``, ``schema`` (and, later,
-``sweep`` and ``calibrate``). Errors in user input end with a one-line message and exit code 2;
+Subcommands: ``run``, ``info``, ``plot``, ``export``, ``sweep``, ``calibrate``, ``diagnose``,
+``cache`` and ``schema``. Errors in user input end with a one-line message and exit code 2;
 no traceback.
 """
 from __future__ import annotations
@@ -67,6 +67,68 @@ def _cmd_diagnose(args: argparse.Namespace) -> int:
     from crashdem.diagnosis.cli import diagnose_command
 
     return diagnose_command(args)
+
+
+def _human(n: float) -> str:
+    for unit in ("B", "kB", "MB", "GB"):
+        if abs(n) < 1000 or unit == "GB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1000
+    return f"{n:.1f} TB"  # pragma: no cover
+
+
+def _dir_bytes(d: Path) -> tuple[int, int]:
+    files = [f for f in d.rglob("*") if f.is_file()]
+    return len(files), sum(f.stat().st_size for f in files)
+
+
+def _cmd_cache(args: argparse.Namespace) -> int:
+    import json
+    import os
+    import time
+
+    from crashdem import runcache
+
+    base = Path(args.root or os.environ.get("CRASHDEM_CACHE") or "~/.cache/crashdem")
+    base = base.expanduser().absolute()
+    runs = base / "runs"
+    if args.cache_command == "info":
+        use = runcache.usage(runs)
+        others = {d.name: dict(zip(("files", "bytes"), _dir_bytes(d)))
+                  for d in sorted(base.iterdir()) if d.is_dir() and d.name != "runs"} \
+            if base.is_dir() else {}
+        if args.json:
+            print(json.dumps({"root": str(base), "runs": use, "other": others}, indent=1))
+            return 0
+        print(f"crashdem cache {base}")
+        print(f"runs: {use['entries']} entries, {_human(use['bytes'])} "
+              f"(this code: {use['current']})")
+        for fp, v in sorted(use["versions"].items(), key=lambda kv: -kv[1]["newest_use"]):
+            age = (time.time() - v["newest_use"]) / 86400.0
+            print(f"  {fp}{' (this code)' if v['current'] else ' (other code)'}: "
+                  f"{v['entries']} entries, {_human(v['bytes'])}, last used {age:.1f} days ago")
+        for name, v in others.items():
+            print(f"{name}: {v['files']} files, {_human(v['bytes'])}")
+        cap = os.environ.get(runcache.MAX_ENV)
+        print(f"size cap of the runs (${runcache.MAX_ENV}): {cap or 'none'}")
+        return 0
+    # prune
+    if args.max_size is None and not args.stale and args.older_than is None:
+        raise ValueError("cache prune: give at least one of --max-size, --stale, --older-than")
+    max_bytes = None if args.max_size is None else runcache.parse_size(args.max_size,
+                                                                       "--max-size")
+    if args.older_than is not None and not (args.older_than >= 0):
+        raise ValueError(f"--older-than: {args.older_than} is out of range; allowed: >= 0 days")
+    out = runcache.prune(runs, max_bytes=max_bytes, stale=args.stale,
+                         older_than_s=None if args.older_than is None
+                         else args.older_than * 86400.0, dry_run=args.dry_run)
+    verb = "would remove" if args.dry_run else "removed"
+    print(f"{verb} {len(out['removed'])} run entries ({_human(out['freed_bytes'])}); "
+          f"kept {out['kept_entries']} ({_human(out['kept_bytes'])})")
+    if out["over_bytes"]:
+        print(f"still {_human(out['over_bytes'])} over --max-size: those entries were used "
+              f"within the last {runcache.GRACE_S / 3600:.0f} h")
+    return 0
 
 
 def _cmd_schema(args: argparse.Namespace) -> int:
@@ -174,6 +236,25 @@ def build_parser() -> argparse.ArgumentParser:
                         "model only (rom, fast, no anchor)")
     ensemble.add_cluster_arguments(d, set_option=False)
     d.set_defaults(func=_cmd_diagnose)
+
+    c = sub.add_parser("cache", help="show or prune the cache of finished runs and beds")
+    c.add_argument("--root", default=None,
+                   help="the crashdem cache directory (default: $CRASHDEM_CACHE, else "
+                        "~/.cache/crashdem)")
+    csub = c.add_subparsers(dest="cache_command", required=True)
+    ci = csub.add_parser("info", help="entries and bytes per cache and per code version")
+    ci.add_argument("--json", action="store_true")
+    cp = csub.add_parser("prune", help="evict run entries (the beds are kept); entries used "
+                                       "in the last hour always stay")
+    cp.add_argument("--max-size", default=None, metavar="SIZE",
+                    help="evict the least recently used entries (other code versions first) "
+                         "until the runs fit, e.g. 20G, 500M, 2GiB")
+    cp.add_argument("--stale", action="store_true",
+                    help="evict every entry made by another version of the code")
+    cp.add_argument("--older-than", type=float, default=None, metavar="DAYS",
+                    help="evict entries not used for this many days")
+    cp.add_argument("--dry-run", action="store_true", help="say what would go; remove nothing")
+    c.set_defaults(func=_cmd_cache)
 
     s = sub.add_parser("schema", help="print the scenario field reference (Markdown)")
     s.set_defaults(func=_cmd_schema)

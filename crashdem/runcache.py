@@ -29,12 +29,24 @@ Hit
     of a run of that scenario with that code and thread count (``crashdem.run`` is
     deterministic: ``tests/crashdem/test_runcache.py``).
 
+Size and eviction
+    Nothing is evicted unless asked. ``crashdem cache prune`` (``prune``) removes entries of
+    other code versions (``stale``), entries not used for some days (``older_than_s``) or the
+    least recently used entries until the cache fits a size (``max_bytes``; other code
+    versions' entries go first). With ``$CRASHDEM_RUN_CACHE_MAX`` set (e.g. ``20G``) every
+    store prunes to that size. A hit refreshes its entry's modification time, which is the
+    "last used" time. Entries used within ``GRACE_S`` (one hour) are never evicted: a
+    diagnosis in progress reads the runs it made again (the DEM-truth runs are read from
+    their entries), and a run another process is copying stays. A hit whose entry vanished
+    between the lookup and the copy is run instead.
+
 API
 ---
 ``run_key(scen) -> str | None``, ``code_fingerprint() -> str``, ``default_root() -> Path``
-``RunCache(root)``: ``entry(scen)``, ``lookup(scen)``, ``run(scen, out_dir, ...)``,
-``hits``, ``runs``, ``describe()``
+``RunCache(root, max_bytes=None)``: ``entry(scen)``, ``lookup(scen)``,
+``run(scen, out_dir, ...)``, ``hits``, ``runs``, ``evicted``, ``describe()``
 ``from_option(text) -> RunCache | None`` (``crashdem diagnose --run-cache``)
+``parse_size(text, field) -> int``, ``usage(root) -> dict``, ``prune(root, ...) -> dict``
 """
 from __future__ import annotations
 
@@ -43,12 +55,20 @@ import functools
 import hashlib
 import json
 import os
+import re
 import shutil
+import time
 from pathlib import Path
 from typing import Any
 
 __all__ = ["RunCache", "run_key", "code_fingerprint", "default_root", "from_option",
-           "KEY_EXCLUDED", "CODE", "OUTPUT_ONLY"]
+           "KEY_EXCLUDED", "CODE", "OUTPUT_ONLY", "MAX_ENV", "GRACE_S", "parse_size",
+           "usage", "prune"]
+
+#: environment variable holding the run cache's size cap (``parse_size``); unset: no cap
+MAX_ENV = "CRASHDEM_RUN_CACHE_MAX"
+#: an entry used (stored or hit) this recently [s] is never evicted
+GRACE_S = 3600.0
 
 #: scenario fields that do not shape a run's signals: they name or place its files
 KEY_EXCLUDED: tuple[tuple[str, str], ...] = (
@@ -190,31 +210,180 @@ def _rewrite_scenario(path: Path, scen: Any, key: str, entry: Path) -> None:
         f.attrs["run_cache_entry"] = str(entry)
 
 
+_UNITS = {"": 1, "b": 1, "k": 10**3, "kb": 10**3, "kib": 2**10, "m": 10**6, "mb": 10**6,
+          "mib": 2**20, "g": 10**9, "gb": 10**9, "gib": 2**30, "t": 10**12, "tb": 10**12,
+          "tib": 2**40}
+
+
+def parse_size(text: str | int | float, field: str = "size") -> int:
+    """Bytes of a size such as ``500M``, ``20G``, ``1.5GiB`` or ``1000000`` (k, M, G, T:
+    powers of 1000; KiB, MiB, GiB, TiB: of 1024). A value that is not a size of at least one
+    byte raises ``ValueError`` naming ``field``."""
+    if isinstance(text, (int, float)) and not isinstance(text, bool):
+        value, unit = float(text), ""
+    else:
+        m = re.fullmatch(r"\s*([0-9]*\.?[0-9]+(?:[eE][+-]?[0-9]+)?)\s*([A-Za-z]*)\s*",
+                         str(text))
+        if m is None or m.group(2).lower() not in _UNITS:
+            raise ValueError(f"{field}: {text!r} is not a size; give bytes or a number with "
+                             "k, M, G, T (x1000) or KiB, MiB, GiB, TiB (x1024), e.g. 20G")
+        value, unit = float(m.group(1)), m.group(2).lower()
+    size = value * _UNITS[unit]
+    if not (size >= 1 and size < 2**63):
+        raise ValueError(f"{field}: {text!r} is out of range; allowed: 1 byte to 8 EiB")
+    return int(size)
+
+
+def _max_from_env() -> int | None:
+    text = os.environ.get(MAX_ENV, "").strip()
+    return parse_size(text, f"${MAX_ENV}") if text else None
+
+
+def _entries(root: Path) -> list[tuple[Path, int, float]]:
+    """Every ``<root>/<fingerprint>/<key>.h5``: (path, bytes, last use), vanished ones left out."""
+    out = []
+    if not root.is_dir():
+        return out
+    for d in root.iterdir():
+        if not d.is_dir():
+            continue
+        for f in d.glob("*.h5"):
+            try:
+                st = f.stat()
+            except OSError:
+                continue
+            out.append((f, st.st_size, st.st_mtime))
+    return out
+
+
+def usage(root: str | os.PathLike) -> dict[str, Any]:
+    """What the run cache under ``root`` holds, per code version: entries, bytes, the newest
+    and oldest use (Unix time), and which version is this code's (``current``)."""
+    root = Path(root).expanduser().absolute()
+    current = code_fingerprint()
+    versions: dict[str, dict[str, Any]] = {}
+    for f, size, used in _entries(root):
+        v = versions.setdefault(f.parent.name, {"entries": 0, "bytes": 0, "newest_use": used,
+                                                "oldest_use": used,
+                                                "current": f.parent.name == current})
+        v["entries"] += 1
+        v["bytes"] += size
+        v["newest_use"] = max(v["newest_use"], used)
+        v["oldest_use"] = min(v["oldest_use"], used)
+    return {"root": str(root), "current": current, "versions": versions,
+            "entries": sum(v["entries"] for v in versions.values()),
+            "bytes": sum(v["bytes"] for v in versions.values())}
+
+
+def prune(root: str | os.PathLike, *, max_bytes: int | None = None, stale: bool = False,
+          older_than_s: float | None = None, grace_s: float = GRACE_S,
+          protect: tuple[Path, ...] = (), dry_run: bool = False,
+          now: float | None = None) -> dict[str, Any]:
+    """Evict run-cache entries under ``root``.
+
+    ``stale``: every entry of another code version; ``older_than_s``: every entry not used for
+    that long; ``max_bytes``: then the least recently used entries, other code versions' first,
+    until the rest fits. An entry used within ``grace_s`` or named in ``protect`` stays
+    whatever the criteria, so the cache can stay above ``max_bytes`` (``over_bytes``).
+    Left-over temporary files of killed copies older than ``grace_s`` are removed, and code
+    version directories left empty. ``dry_run`` removes nothing and reports the same.
+    Returns ``{"removed": [paths], "freed_bytes", "kept_entries", "kept_bytes",
+    "over_bytes"}``."""
+    if max_bytes is not None and max_bytes < 0:
+        raise ValueError(f"max_bytes: {max_bytes} is out of range; allowed: >= 0")
+    if older_than_s is not None and older_than_s < 0:
+        raise ValueError(f"older_than_s: {older_than_s} is out of range; allowed: >= 0")
+    root = Path(root).expanduser().absolute()
+    now = time.time() if now is None else now
+    current = code_fingerprint()
+    keep = {Path(p).absolute() for p in protect}
+    items = sorted(_entries(root), key=lambda e: (e[0].parent.name == current, e[2], str(e[0])))
+    removed: list[tuple[Path, int]] = []
+    kept: list[tuple[Path, int]] = []
+
+    def evictable(f: Path, used: float) -> bool:
+        return f.absolute() not in keep and now - used >= grace_s
+
+    total = sum(size for _, size, _ in items)
+    for f, size, used in items:  # first the criteria of their own
+        if evictable(f, used) and ((stale and f.parent.name != current)
+                                   or (older_than_s is not None and now - used >= older_than_s)):
+            removed.append((f, size))
+            total -= size
+        else:
+            kept.append((f, size, used))
+    if max_bytes is not None:  # then the least recently used, other versions first
+        rest = []
+        for f, size, used in kept:
+            if total > max_bytes and evictable(f, used):
+                removed.append((f, size))
+                total -= size
+            else:
+                rest.append((f, size, used))
+        kept = rest
+    if not dry_run:
+        for f, _ in removed:
+            try:
+                f.unlink()
+            except FileNotFoundError:
+                pass
+        if root.is_dir():
+            for d in root.iterdir():
+                if not d.is_dir():
+                    continue
+                for t in d.glob(".*.tmp"):
+                    try:
+                        if now - t.stat().st_mtime >= grace_s:
+                            t.unlink()
+                    except OSError:
+                        pass
+                try:
+                    d.rmdir()  # only when empty
+                except OSError:
+                    pass
+    return {"removed": [str(f) for f, _ in removed],
+            "freed_bytes": sum(size for _, size in removed),
+            "kept_entries": len(kept), "kept_bytes": total,
+            "over_bytes": max(0, total - max_bytes) if max_bytes is not None else 0}
+
+
 class RunCache:
     """Finished runs under ``<root>/<code fingerprint>/<run key>.h5``.
 
     Parameters
     ----------
     root : directory of the cache (created on the first store)
+    max_bytes : size cap: every store then evicts the least recently used entries beyond it
+        (``prune``); None (default) reads ``$CRASHDEM_RUN_CACHE_MAX`` (``parse_size``; unset:
+        no cap)
 
     Attributes
     ----------
     directory : ``root / code_fingerprint()``
     hits : runs taken from the cache by this object
     runs : runs made (and stored) by this object
+    evicted : entries this object's stores evicted
     """
 
-    def __init__(self, root: str | os.PathLike) -> None:
+    def __init__(self, root: str | os.PathLike, max_bytes: int | None = None) -> None:
         self.root = Path(root).expanduser().absolute()
         self.directory = self.root / code_fingerprint()
+        self.max_bytes = _max_from_env() if max_bytes is None else parse_size(max_bytes,
+                                                                               "max_bytes")
         self.hits = 0
         self.runs = 0
+        self.evicted = 0
 
     def __repr__(self) -> str:
         return f"RunCache({str(self.root)!r})"
 
-    def __reduce__(self):  # a worker gets the root, not this process's counts
-        return (RunCache, (str(self.root),))
+    def __reduce__(self):  # a worker gets the root and the cap, not this process's counts
+        return (RunCache, (str(self.root), self.max_bytes))
+
+    def _stored(self, e: Path) -> None:
+        if self.max_bytes is not None:
+            self.evicted += len(prune(self.root, max_bytes=self.max_bytes,
+                                      protect=(e,))["removed"])
 
     def entry(self, scen: Any) -> Path | None:
         """Where a run of ``scen`` is (or would be) kept; None when it has no key."""
@@ -253,16 +422,31 @@ class RunCache:
 
         e = self.lookup(scen)
         if e is not None:
+            try:
+                try:
+                    os.utime(e)  # its last use, the order of eviction
+                except FileNotFoundError:
+                    raise
+                except OSError:  # a cache this user may read but not write
+                    pass
+                if not keep:
+                    self.hits += 1
+                    return e
+                path = default_output(scen, out_dir)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                with output_lock(path):
+                    tmp = path.with_name(f".{path.name}.pid{os.getpid()}.tmp")
+                    try:
+                        shutil.copyfile(e, tmp)
+                    except FileNotFoundError:
+                        tmp.unlink(missing_ok=True)
+                        raise
+                    _rewrite_scenario(tmp, scen, e.stem, e)
+                    os.replace(tmp, path)
+            except FileNotFoundError:  # evicted by another process meanwhile: run it
+                e = None
+        if e is not None:
             self.hits += 1
-            if not keep:
-                return e
-            path = default_output(scen, out_dir)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            with output_lock(path):
-                tmp = path.with_name(f".{path.name}.pid{os.getpid()}.tmp")
-                shutil.copyfile(e, tmp)
-                _rewrite_scenario(tmp, scen, e.stem, e)
-                os.replace(tmp, path)
             if plots if plots is not None else scen["output.plots"]:
                 from crashdem.plotting import plot_result
 
@@ -278,14 +462,20 @@ class RunCache:
         if keep:
             shutil.copyfile(path, tmp)
             os.replace(tmp, e)
+            self._stored(e)
             return path
         if path.parent.stat().st_dev == e.parent.stat().st_dev:
             os.replace(path, e)
         else:  # another file system: copied next to the entry first, then renamed
             shutil.move(str(path), tmp)
             os.replace(tmp, e)
+        self._stored(e)
         return e
 
     def describe(self) -> dict[str, Any]:
-        """What a report records: the directory, the runs taken from it and those made."""
-        return {"directory": str(self.directory), "hits": self.hits, "runs": self.runs}
+        """What a report records: the directory, the runs taken from it and those made (and,
+        with a size cap, the cap and the entries evicted)."""
+        d = {"directory": str(self.directory), "hits": self.hits, "runs": self.runs}
+        if self.max_bytes is not None:
+            d.update(max_bytes=self.max_bytes, evicted=self.evicted)
+        return d

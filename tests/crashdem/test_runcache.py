@@ -136,3 +136,168 @@ def test_the_option_and_the_default_root(tmp_path, monkeypatch):
     rc.hits = 3
     back = pickle.loads(pickle.dumps(rc))  # a worker gets the root, not the counts
     assert back.root == rc.root and back.hits == 0
+
+
+def _fake_entries(root, spec, now):
+    """Entries ``{(version, name): (bytes, age_s)}`` under ``root`` (not results: prune reads
+    sizes and times only)."""
+    import os
+
+    paths = {}
+    for (version, name), (size, age) in spec.items():
+        f = root / version / f"{name}.h5"
+        f.parent.mkdir(parents=True, exist_ok=True)
+        f.write_bytes(b"x" * size)
+        os.utime(f, (now - age, now - age))
+        paths[(version, name)] = f
+    return paths
+
+
+def test_parse_size_reads_sizes_and_names_the_field_of_a_bad_one():
+    from crashdem.runcache import parse_size
+
+    assert parse_size("20G") == 20 * 10**9
+    assert parse_size("500 MB") == 500 * 10**6
+    assert parse_size("1.5GiB") == int(1.5 * 2**30)
+    assert parse_size("1000") == 1000 and parse_size(4096) == 4096
+    for bad in ("12X", "", "-3G", "G", "0", "1e30"):
+        with pytest.raises(ValueError, match="--max-size"):
+            parse_size(bad, "--max-size")
+
+
+def test_prune_evicts_the_least_recently_used_and_other_code_first(tmp_path):
+    from crashdem.runcache import prune, usage
+
+    now = 1.0e9
+    cur = code_fingerprint()
+    day = 86400.0
+    p = _fake_entries(tmp_path, {
+        (cur, "a"): (1000, 5 * day), (cur, "b"): (1000, 3 * day), (cur, "c"): (1000, 1 * day),
+        (cur, "fresh"): (1000, 60.0),                       # used a minute ago: never evicted
+        ("0123456789abcdef", "old"): (1000, 2 * day),       # another code version
+    }, now)
+    stray = tmp_path / cur / ".x.h5.pid1.tmp"
+    stray.write_bytes(b"partial")
+    import os
+
+    os.utime(stray, (now - day, now - day))
+    u = usage(tmp_path)
+    assert u["entries"] == 5 and u["bytes"] == 5000 and u["versions"][cur]["current"]
+    assert not u["versions"]["0123456789abcdef"]["current"]
+    # a dry run reports and removes nothing
+    dry = prune(tmp_path, max_bytes=2500, dry_run=True, now=now)
+    assert all(f.exists() for f in p.values()) and stray.exists()
+    # the other version goes first, then the least recently used of this code's
+    out = prune(tmp_path, max_bytes=2500, now=now)
+    assert out == dry
+    assert set(out["removed"]) == {str(p["0123456789abcdef", "old"]), str(p[cur, "a"]),
+                                   str(p[cur, "b"])}
+    assert out["freed_bytes"] == 3000 and out["kept_bytes"] == 2000 and out["over_bytes"] == 0
+    assert not (tmp_path / "0123456789abcdef").exists()   # its empty directory is gone too
+    assert not stray.exists()                                # a killed copy's left-over
+    # what was used within the grace period stays, even above the cap
+    out = prune(tmp_path, max_bytes=10, now=now)
+    assert out["removed"] == [str(p[cur, "c"])] and p[cur, "fresh"].exists()
+    assert out["over_bytes"] == 990
+
+
+def test_prune_by_age_and_by_code_version(tmp_path):
+    from crashdem.runcache import prune
+
+    now = 2.0e9
+    cur = code_fingerprint()
+    day = 86400.0
+    p = _fake_entries(tmp_path, {(cur, "new"): (10, 2 * day), (cur, "old"): (10, 40 * day),
+                                 ("ffffffffffffffff", "x"): (10, 2 * day)}, now)
+    out = prune(tmp_path, stale=True, now=now)
+    assert out["removed"] == [str(p["ffffffffffffffff", "x"])]
+    out = prune(tmp_path, older_than_s=30 * day, now=now)
+    assert out["removed"] == [str(p[cur, "old"])] and p[cur, "new"].exists()
+    with pytest.raises(ValueError, match="older_than_s"):
+        prune(tmp_path, older_than_s=-1.0)
+
+
+def test_a_hit_is_a_use_and_a_capped_cache_evicts_on_store(tmp_path, monkeypatch):
+    """A hit refreshes its entry's last use, so a size cap evicts the entry not used since;
+    the cap comes from ``$CRASHDEM_RUN_CACHE_MAX`` (a bad value names the variable); an
+    entry evicted between the lookup and the copy is run instead of failing."""
+    import os
+    import shutil
+
+    from crashdem import runcache
+
+    rc = RunCache(tmp_path / "cache")
+    assert rc.max_bytes is None and "max_bytes" not in rc.describe()
+    a = rc.run(_tiny(), tmp_path / "a", keep=False)
+    b = rc.run(_tiny(**{"scenario.seed": 7}), tmp_path / "b", keep=False)
+    long_ago = 1.0e9
+    for e in (a, b):
+        os.utime(e, (long_ago, long_ago))
+    assert rc.run(_tiny(), tmp_path / "c", keep=False) == a   # a hit: a is used now
+    assert a.stat().st_mtime > long_ago + 1e8
+    monkeypatch.setenv(runcache.MAX_ENV, "nonsense")
+    with pytest.raises(ValueError, match="CRASHDEM_RUN_CACHE_MAX"):
+        RunCache(tmp_path / "cache")
+    monkeypatch.setenv(runcache.MAX_ENV, str(a.stat().st_size + b.stat().st_size
+                                             + b.stat().st_size // 2))
+    capped = RunCache(tmp_path / "cache")
+    c = capped.run(_tiny(**{"scenario.seed": 8}), tmp_path / "d", keep=False)
+    assert c.exists() and a.exists() and not b.exists()       # b, unused since, went
+    assert capped.describe()["evicted"] == 1
+    import pickle
+
+    assert pickle.loads(pickle.dumps(capped)).max_bytes == capped.max_bytes
+    # an entry that vanishes after the lookup: the run is made again, not an error
+    monkeypatch.delenv(runcache.MAX_ENV)
+    rc2 = RunCache(tmp_path / "cache")
+    real_copy = shutil.copyfile
+
+    def evicted_meanwhile(src, dst, *k, **kw):
+        if Path(src) == a:
+            Path(src).unlink()
+            raise FileNotFoundError(src)
+        return real_copy(src, dst, *k, **kw)
+
+    monkeypatch.setattr(runcache.shutil, "copyfile", evicted_meanwhile)
+    out = rc2.run(_tiny(**{"scenario.name": "again"}), tmp_path / "e")
+    assert (rc2.hits, rc2.runs) == (0, 1) and out.exists()
+    with open_result(out) as res:
+        assert res.complete
+
+
+def test_the_cache_command_shows_and_prunes(tmp_path, capsys):
+    import json
+    import time
+
+    from crashdem.cli import main
+
+    cur = code_fingerprint()
+    now = time.time()
+    p = _fake_entries(tmp_path / "runs", {(cur, "a"): (2000, 10 * 86400.0),
+                                          (cur, "b"): (3000, 7200.0),
+                                          ("0123456789abcdef", "c"): (500, 86400.0)}, now)
+    (tmp_path / "packings").mkdir()
+    (tmp_path / "packings" / "bed.h5").write_bytes(b"y" * 700)
+    assert main(["cache", "--root", str(tmp_path), "info", "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["runs"]["entries"] == 3 and info["runs"]["bytes"] == 5500
+    assert info["other"]["packings"] == {"files": 1, "bytes": 700}
+    assert main(["cache", "--root", str(tmp_path), "info"]) == 0
+    text = capsys.readouterr().out
+    assert "3 entries" in text and "(other code)" in text and "packings: 1 files" in text
+    assert main(["cache", "--root", str(tmp_path), "prune", "--stale", "--dry-run"]) == 0
+    assert "would remove 1 run entries" in capsys.readouterr().out
+    assert p["0123456789abcdef", "c"].exists()
+    assert main(["cache", "--root", str(tmp_path), "prune", "--older-than", "5"]) == 0
+    assert "removed 1 run entries" in capsys.readouterr().out
+    assert not p[cur, "a"].exists() and p[cur, "b"].exists()
+    assert main(["cache", "--root", str(tmp_path), "prune", "--max-size", "1k"]) == 0
+    assert not p["0123456789abcdef", "c"].exists() and not p[cur, "b"].exists()
+    assert (tmp_path / "packings" / "bed.h5").exists()          # the beds are kept
+    # bad input: a clear message naming the option, exit code 2
+    assert main(["cache", "--root", str(tmp_path), "prune"]) == 2
+    assert "--max-size, --stale, --older-than" in capsys.readouterr().err
+    assert main(["cache", "--root", str(tmp_path), "prune", "--max-size", "lots"]) == 2
+    assert "--max-size" in capsys.readouterr().err
+    assert main(["cache", "--root", str(tmp_path), "prune", "--older-than", "-2"]) == 2
+    assert "--older-than" in capsys.readouterr().err
