@@ -1671,13 +1671,51 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
         h["parameters"] = {**h["parameters"], fs.parameter: x}
         if isinstance(h.get("uncertainty"), dict):
             h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
+    derived = _derived_values(fs.parameter, x, interval)
+    if derived:
+        h["full_model"]["derived"] = derived
     rep.fit.setdefault("full_search", {})["named"] = {"hypothesis": name, fs.parameter: x,
                                                       "parameter": fs.parameter,
                                                       "uncertainty": sd,
                                                       "noise_uncertainty": noise_sd,
                                                       "interval": interval, "unit": fs.unit,
                                                       **({"form": fs.form}
-                                                         if fs.form is not None else {})}
+                                                         if fs.form is not None else {}),
+                                                      **({"derived": derived}
+                                                         if derived else {})}
+
+
+def _rebound(e: float) -> float:
+    from soil.contact_laws import damping_ratio, no_tension_restitution
+
+    return float(no_tension_restitution(damping_ratio(min(max(float(e), 1e-12), 1.0))))
+
+
+#: searched parameter -> (derived name, unit, function, what it is): quantities a user compares
+#: with another code or a measurement. The restitution searched is the nominal one of crashdem's
+#: dashpot (Yade's betan convention), whose contact never pulls; a head-on contact of it
+#: rebounds faster (``soil.Material.rebound_restitution``), and a code whose dashpot may pull
+#: has nominal = rebound
+DERIVED: dict[str, tuple[str, str, Any, str]] = {
+    "restitution": ("rebound_restitution", "1", _rebound,
+                    "the rebound ratio of a head-on grain contact at this nominal restitution "
+                    "(crashdem's contact force never pulls, so it opens early; in a code whose "
+                    "dashpot may pull, nominal and rebound restitution are the same)"),
+}
+
+
+def _derived_values(parameter: str, x: float, interval: Mapping[str, Any] | None
+                    ) -> dict[str, Any] | None:
+    """The derived quantity of a named searched value (``DERIVED``) at the value and at the
+    ends of its interval, or None."""
+    d = DERIVED.get(parameter)
+    if d is None:
+        return None
+    key, unit, f, what = d
+    out: dict[str, Any] = {"name": key, "value": f(x), "unit": unit, "meaning": what}
+    if interval is not None:
+        out["interval"] = [f(interval["low"]), f(interval["high"])]
+    return out
 
 
 def _confirmation_overrides(h: dict[str, Any],

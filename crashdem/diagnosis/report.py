@@ -219,6 +219,13 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                       f"{open_txt}: reported as ± {_fmt(named['uncertainty'], 3)}{u} (the noise "
                       f"alone: ± {_fmt(named['noise_uncertainty'], 3)}{u}; the larger of these "
                       f"and the numerics check below)."]
+            der = named.get("derived")
+            if der:
+                du = "" if der["unit"] in ("", "1", "-") else f" {der['unit']}"
+                span = (f" (interval {_fmt(der['interval'][0], 3)} to "
+                        f"{_fmt(der['interval'][1], 3)}{du})" if der.get("interval") else "")
+                lines += ["", f"Derived: {der['name']} = {_fmt(der['value'], 3)}{du}{span}: "
+                          f"{der['meaning']}."]
             num = named.get("numerics")
             if num:
                 vals = "; ".join(f"x{p['radius_scale']:g}: {_fmt(p['value'], 4)}{u}"

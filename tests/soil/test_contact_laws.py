@@ -55,6 +55,48 @@ def test_damping_ratio_reproduces_restitution(e):
     assert cl.damping_ratio(1.0) == 0.0
 
 
+def _no_tension_rebound_ode(zeta):
+    """Independent oracle: scipy integration of x'' = -x - 2 zeta x' from x = 0, x' = 1 until
+    the force x + 2 zeta x' first crosses 0 downwards; |x'| there."""
+    from scipy.integrate import solve_ivp
+
+    def release(t, y):
+        return y[0] + 2.0 * zeta * y[1]
+
+    release.terminal = True
+    release.direction = -1
+    sol = solve_ivp(lambda t, y: [y[1], -y[0] - 2.0 * zeta * y[1]], [0.0, 200.0], [0.0, 1.0],
+                    events=release, rtol=1e-12, atol=1e-14, first_step=1e-9)
+    return abs(sol.y_events[0][0][1])
+
+
+@settings(deadline=None, max_examples=30)
+@given(st.floats(1e-3, 8.0))
+@example(1.0)
+@example(1.0 - 1e-9)
+@example(1.0 + 1e-9)
+def test_no_tension_restitution_matches_the_ode(zeta):
+    """Oracle: ODE of the linear spring-dashpot released when its force would pull, in the
+    under-, critically and over-damped branches (the three closed forms join at zeta = 1)."""
+    assert cl.no_tension_restitution(zeta) == pytest.approx(_no_tension_rebound_ode(zeta),
+                                                            rel=1e-7, abs=1e-12)
+
+
+def test_no_tension_restitution_exceeds_the_nominal_one():
+    """Oracle: the force-free release comes before the overlap closes, so the rebound is
+    faster than the nominal restitution (full oscillator) and tends to it as zeta -> 0;
+    monotonic in the damping; refused outside [0, inf)."""
+    es = np.linspace(0.02, 0.99, 60)
+    reb = [cl.no_tension_restitution(cl.damping_ratio(e)) for e in es]
+    assert all(r > e for r, e in zip(reb, es))
+    assert np.all(np.diff(reb) > 0)
+    assert cl.no_tension_restitution(cl.damping_ratio(0.999)) == pytest.approx(0.999, abs=1e-4)
+    assert cl.no_tension_restitution(0.0) == 1.0
+    for bad in (-0.1, float("nan"), float("inf")):
+        with pytest.raises(ValueError, match="zeta"):
+            cl.no_tension_restitution(bad)
+
+
 def test_damping_coefficient_and_duration():
     """Oracle: c = 2 zeta sqrt(m k); t_c = pi sqrt(m/k) (harmonic half period)."""
     assert cl.damping_coefficient(0.5, 2.0, 8.0) == pytest.approx(4.0, rel=REL)

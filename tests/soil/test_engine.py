@@ -350,6 +350,9 @@ def test_viscous_damping_restitution_and_ledger():
     e_dem = -va[2] / vb[2]
     e_ode = _damped_restitution_oracle(m, kn, m0.damping_ratio, 1.0)
     assert abs(e_dem - e_ode) < DAMPED_RESTITUTION_TOL
+    # the rebound the material reports for itself (closed form, not the nominal e = 0.5)
+    assert abs(e_dem - m0.rebound_restitution) < DAMPED_RESTITUTION_TOL
+    assert m0.rebound_restitution > e_target + 0.04
     en = sim.energy()
     ke0 = 0.5 * m
     assert en["dissipated_viscous"] == pytest.approx(ke0 * (1 - e_dem**2), rel=5e-3)

@@ -1171,6 +1171,49 @@ def test_realisation_interval_of_a_named_value():
     assert _profile_scatter(jag[:3], deep) == 0.0  # fewer than four levels
 
 
+def test_a_named_restitution_reports_its_rebound_restitution():
+    """A named contact damping carries the rebound ratio of a head-on contact at its nominal
+    restitution and at its interval's ends (``confirm.DERIVED``; oracle: the closed form of
+    ``soil.contact_laws.no_tension_restitution``, itself tested against an ODE), in the JSON
+    and the readable report; other searched parameters carry none."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH
+    from crashdem.diagnosis.confirm import _adopt_full_parameters
+    from soil import Material
+
+    fs = DROP_FULL_SEARCH["contact_damping"]
+    prof = {0.1: 30.0, 0.2: 36.0, 0.3: 31.0, 0.5: 20.0}
+    lv = [{"hypothesis": "contact_damping", "search_value": v, "delta_bic_vs_reference": d}
+          for v, d in prof.items()]
+    rep = type("R", (), {})()
+    rep.hypotheses = [{"name": "contact_damping", "parameters": {"restitution": 0.25},
+                       "uncertainty": {"restitution": 0.1}}]
+    rep.fit = {}
+    _adopt_full_parameters(rep, {**lv[1], "overrides": {"k": 0.2}, "score": 0.9}, fs, lv,
+                           {"delta_bic": 0.0, "score": 0.8, "scatter": 8.0})
+    named = rep.fit["full_search"]["named"]
+    der = named["derived"]
+    rebound = Material(young=1e7, density=2650.0, friction_angle=0.5,
+                       restitution=0.2).rebound_restitution
+    assert der["name"] == "rebound_restitution" and der["unit"] == "1"
+    assert der["value"] == pytest.approx(rebound, rel=1e-12)
+    assert der["value"] == pytest.approx(0.3249, abs=1e-3)
+    lo, hi = named["interval"]["low"], named["interval"]["high"]
+    want = [Material(young=1e7, density=2650.0, friction_angle=0.5,
+                     restitution=v).rebound_restitution for v in (lo, hi)]
+    assert der["interval"] == pytest.approx(want, rel=1e-12) and want[0] < der["value"] < want[1]
+    assert rep.hypotheses[0]["full_model"]["derived"] == der
+    # a floor depth derives nothing
+    floor = DROP_FULL_SEARCH["boundary_proximity"]
+    fl = [{"hypothesis": "boundary_proximity", "search_value": v, "delta_bic_vs_reference": d}
+          for v, d in zip(floor.values, (5.0, 20.0, 30.0, 22.0, 10.0, 3.0))]
+    rep.hypotheses = [{"name": "boundary_proximity", "parameters": {"floor_depth": 0.8}}]
+    rep.fit = {}
+    _adopt_full_parameters(rep, {**fl[2], "overrides": {}, "score": 0.9}, floor, fl,
+                           {"delta_bic": 0.0, "score": 0.8, "scatter": 2.0})
+    assert "derived" not in rep.fit["full_search"]["named"]
+    assert "derived" not in rep.hypotheses[0]["full_model"]
+
+
 def test_a_recording_longer_than_the_simulation_is_compared_where_both_exist(layering_case):
     """A recording that runs past the end of the baseline simulation is cut there
     (``_crop_to_simulation``): the simulation has no value after its end, and holding its last
