@@ -42,3 +42,36 @@ def test_the_digest_follows_the_packing(two_fingerprints):
     base = digest(dict(BASELINE_NUMERICS))
     assert base == two_fingerprints[0]["digest"]
     assert digest({**BASELINE_NUMERICS, "scenario.seed": 2}) != base
+
+
+def _numpy_simd_targets() -> list[str]:
+    """NumPy's dispatch targets above its baseline that this CPU runs (e.g. X86_V3, X86_V4,
+    AVX512_ICL); empty when NumPy does not say."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # pragma: no cover - another NumPy layout
+        return []
+    return [t for t in __cpu_dispatch__ if __cpu_features__.get(t)]
+
+
+def test_the_realisation_does_not_follow_numpys_simd_dispatch(two_fingerprints):
+    """Oracle: the same run in a process where NumPy's SIMD dispatch above its baseline is
+    switched off (``NPY_DISABLE_CPU_FEATURES``), i.e. NumPy as on a CPU without AVX2 / AVX-512:
+    the digests of the run and of its bed are the same. Before ``soil.portable`` the grain
+    masses came from NumPy's AVX-512 ``r**3``, one bit off the C library's, and an AVX-512
+    machine deposited another bed (``392b3e825dcd2bfb`` against ``bd6d0870cf204247`` on the same
+    machine with the dispatch off; docs/diagnosis.md, "Another machine, another realisation")."""
+    import json
+    import os
+    import subprocess
+
+    targets = _numpy_simd_targets()
+    if not targets:
+        pytest.skip("NumPy dispatches nothing above its baseline on this CPU")
+    env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(targets))
+    out = subprocess.run([sys.executable, str(ROOT / "validation" / "realisation_fingerprint.py")],
+                         env=env, capture_output=True, text=True, check=True, timeout=900)
+    other = json.loads(out.stdout.strip().splitlines()[-1])
+    mine = two_fingerprints[0]
+    assert other["deposition_digest"] == mine["deposition_digest"]
+    assert other["digest"] == mine["digest"]
