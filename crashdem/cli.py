@@ -131,6 +131,23 @@ def _cmd_cache(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_fingerprint(args: argparse.Namespace) -> int:
+    import json
+
+    from crashdem.realisation import fingerprint
+
+    fp = fingerprint()
+    if args.json:
+        print(json.dumps(fp))
+        return 0
+    print(f"DEM realisation digest: {fp['digest']} (bed {fp['deposition_digest']})")
+    print(f"cpu {fp['cpu']} ({fp['machine']}), python {fp['python']}, numpy {fp['numpy']} "
+          f"(SIMD above baseline: {' '.join(fp['numpy_simd']) or 'none'}), scipy {fp['scipy']}, "
+          f"numba {fp['numba']}, threads {fp['threads']}")
+    print("two machines with the same digest give the same DEM runs, bit for bit")
+    return 0
+
+
 def _cmd_schema(args: argparse.Namespace) -> int:
     from crashdem.scenario import schema_markdown
 
@@ -255,6 +272,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="evict entries not used for this many days")
     cp.add_argument("--dry-run", action="store_true", help="say what would go; remove nothing")
     c.set_defaults(func=_cmd_cache)
+
+    f = sub.add_parser("fingerprint", help="digest of this machine's DEM realisation (a small "
+                                           "deposition and impact, ~10 s): the same digest on "
+                                           "two machines = the same runs bit for bit")
+    f.add_argument("--json", action="store_true")
+    f.set_defaults(func=_cmd_fingerprint)
 
     s = sub.add_parser("schema", help="print the scenario field reference (Markdown)")
     s.set_defaults(func=_cmd_schema)

@@ -44,16 +44,6 @@ def test_the_digest_follows_the_packing(two_fingerprints):
     assert digest({**BASELINE_NUMERICS, "scenario.seed": 2}) != base
 
 
-def _numpy_simd_targets() -> list[str]:
-    """NumPy's dispatch targets above its baseline that this CPU runs (e.g. X86_V3, X86_V4,
-    AVX512_ICL); empty when NumPy does not say."""
-    try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-    except ImportError:  # pragma: no cover - another NumPy layout
-        return []
-    return [t for t in __cpu_dispatch__ if __cpu_features__.get(t)]
-
-
 def test_the_realisation_does_not_follow_numpys_simd_dispatch(two_fingerprints):
     """Oracle: the same run in a process where NumPy's SIMD dispatch above its baseline is
     switched off (``NPY_DISABLE_CPU_FEATURES``), i.e. NumPy as on a CPU without AVX2 / AVX-512:
@@ -65,7 +55,7 @@ def test_the_realisation_does_not_follow_numpys_simd_dispatch(two_fingerprints):
     import os
     import subprocess
 
-    targets = _numpy_simd_targets()
+    targets = rf.numpy_simd()
     if not targets:
         pytest.skip("NumPy dispatches nothing above its baseline on this CPU")
     env = dict(os.environ, NPY_DISABLE_CPU_FEATURES=" ".join(targets))
@@ -75,3 +65,19 @@ def test_the_realisation_does_not_follow_numpys_simd_dispatch(two_fingerprints):
     mine = two_fingerprints[0]
     assert other["deposition_digest"] == mine["deposition_digest"]
     assert other["digest"] == mine["digest"]
+
+
+def test_the_command_prints_the_same_fingerprint(two_fingerprints, capsys):
+    """``crashdem fingerprint --json`` prints this process's fingerprint (a third fresh run);
+    the readable form names the digest and NumPy's SIMD targets."""
+    import json
+
+    from crashdem.cli import main
+
+    assert main(["fingerprint", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert out == two_fingerprints[0]
+    assert out["numpy_simd"] == rf.numpy_simd()
+    assert main(["fingerprint"]) == 0
+    text = capsys.readouterr().out
+    assert out["digest"] in text and out["deposition_digest"] in text
