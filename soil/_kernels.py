@@ -511,6 +511,37 @@ H_NCOL_FULL = 16
 I_BOND = 0
 
 
+@numba.njit(cache=True, inline="always")
+def _pair_mean(a1, a2):
+    """Harmonic mean 2 a1 a2 / (a1 + a2) of two materials' coefficients (0 if both are 0)."""
+    return 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _clear_pair(hf, tq, k, has_rot):
+    """Pair k carries no contact any more: its history (and its torques) set to zero."""
+    for c in range(hf.shape[1]):
+        hf[k, c] = 0.0
+    if has_rot:
+        for c in range(6):
+            tq[k, c] = 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _shear_trial(vrx, vry, vrz, nx, ny, nz, fx, fy, fz, n0x, n0y, n0z, twist, ks, dt):
+    """The step's trial shear force of a contact (Cundall-Strack, shared by the particle pairs
+    and the boundary contacts): the normal approach rate ``delta_dot = -v_r . n``, the stored
+    shear force ``(fx, fy, fz)`` rotated from the old normal and twisted (``rotate_shear``) as
+    ``(ox, oy, oz)``, the tangential displacement ``du = (v_r - (v_r . n) n) dt`` and the trial
+    force ``o - k_s du``; returns ``(delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz)``."""
+    vn = vrx * nx + vry * ny + vrz * nz
+    ox, oy, oz = rotate_shear(fx, fy, fz, n0x, n0y, n0z, nx, ny, nz, twist)
+    dux = (vrx - vn * nx) * dt
+    duy = (vry - vn * ny) * dt
+    duz = (vrz - vn * nz) * dt
+    return -vn, ox, oy, oz, dux, duy, duz, ox - ks * dux, oy - ks * duy, oz - ks * duz
+
+
 @pjit
 def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, dt, has_rot,
                 has_coh, has_roll, has_visc, e_fric, e_visc, e_bond):
@@ -554,11 +585,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     bonded = hi[k, I_BOND] == BOND_ACTIVE
                 if not bonded and d2 >= rs * rs:
                     if hf[k, H_N] != 0.0 or hf[k, H_N + 1] != 0.0 or hf[k, H_N + 2] != 0.0:
-                        for c in range(hf.shape[1]):
-                            hf[k, c] = 0.0
-                        if has_rot:
-                            for c in range(6):
-                                tq[k, c] = 0.0
+                        _clear_pair(hf, tq, k, has_rot)
                     continue
                 dist = math.sqrt(d2)
                 inv_d = 1.0 / dist
@@ -595,16 +622,9 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     vrz += sx * ny - sy * nx
                     twist = 0.5 * dt * (nx * (w[i, 0] + w[j, 0]) + ny * (w[i, 1] + w[j, 1])
                                         + nz * (w[i, 2] + w[j, 2]))
-                vn = vrx * nx + vry * ny + vrz * nz
-                delta_dot = -vn
-                ox, oy, oz = rotate_shear(hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
-                                          n0x, n0y, n0z, nx, ny, nz, twist)
-                dux = (vrx - vn * nx) * dt
-                duy = (vry - vn * ny) * dt
-                duz = (vrz - vn * nz) * dt
-                fsx = ox - ks * dux
-                fsy = oy - ks * duy
-                fsz = oz - ks * duz
+                delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
+                    vrx, vry, vrz, nx, ny, nz, hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
+                    n0x, n0y, n0z, twist, ks, dt)
                 if bonded:
                     an = hf[k, H_AN]
                     at = hf[k, H_AT]
@@ -636,11 +656,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                             fn = 0.0
                     if not bonded and delta <= 0.0:
                         # bond gone and spheres apart: the contact no longer exists
-                        for c in range(hf.shape[1]):
-                            hf[k, c] = 0.0
-                        if has_rot:
-                            for c in range(6):
-                                tq[k, c] = 0.0
+                        _clear_pair(hf, tq, k, has_rot)
                         continue
                 else:
                     cn = 0.0
@@ -691,12 +707,8 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         dty = (wry - wn * ny) * dt
                         dtz = (wrz - wn * nz) * dt
                         if use_coh_m:
-                            a1 = mat[mi, M_AKR]
-                            a2 = mat[mj, M_AKR]
-                            akr = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
-                            a1 = mat[mi, M_AKTW]
-                            a2 = mat[mj, M_AKTW]
-                            aktw = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                            akr = _pair_mean(mat[mi, M_AKR], mat[mj, M_AKR])
+                            aktw = _pair_mean(mat[mi, M_AKTW], mat[mj, M_AKTW])
                             kb = akr * ks * ri * rj
                             kt = aktw * ks * ri * rj
                             mbx = mox - kb * dtx
@@ -986,15 +998,8 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             vrz += w[i, 0] * ay - w[i, 1] * ax
             twist = 0.5 * dt * (nx * (w[i, 0] + b_omg[b, 0]) + ny * (w[i, 1] + b_omg[b, 1])
                                 + nz * (w[i, 2] + b_omg[b, 2]))
-        vn = vrx * nx + vry * ny + vrz * nz
-        delta_dot = -vn
-        ox, oy, oz = rotate_shear(fsx0, fsy0, fsz0, n0x, n0y, n0z, nx, ny, nz, twist)
-        dux = (vrx - vn * nx) * dt
-        duy = (vry - vn * ny) * dt
-        duz = (vrz - vn * nz) * dt
-        fsx = ox - ks * dux
-        fsy = oy - ks * duy
-        fsz = oz - ks * duz
+        delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
+            vrx, vry, vrz, nx, ny, nz, fsx0, fsy0, fsz0, n0x, n0y, n0z, twist, ks, dt)
         cn = 0.0
         if has_visc:
             e_pair = min(mat[mb, M_RESTITUTION], mat[mi, M_RESTITUTION])
@@ -1123,12 +1128,8 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
                 mt2 = hf[k, H_MT] ** 2 + hf[k, H_MT + 1] ** 2 + hf[k, H_MT + 2] ** 2
                 if mb2 > 0.0 or mt2 > 0.0:
                     if bonded and mat[mi, M_MOMENTS] > 0.0 and mat[mj, M_MOMENTS] > 0.0:
-                        a1 = mat[mi, M_AKR]
-                        a2 = mat[mj, M_AKR]
-                        akr = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
-                        a1 = mat[mi, M_AKTW]
-                        a2 = mat[mj, M_AKTW]
-                        aktw = 2.0 * a1 * a2 / (a1 + a2) if a1 + a2 > 0.0 else 0.0
+                        akr = _pair_mean(mat[mi, M_AKR], mat[mj, M_AKR])
+                        aktw = _pair_mean(mat[mi, M_AKTW], mat[mj, M_AKTW])
                         if akr > 0.0:
                             e_m += 0.5 * mb2 / (akr * ks * ri * rj)
                         if aktw > 0.0:
