@@ -32,7 +32,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from .portable import cube
+from .portable import sphere_volume
 
 jit = functools.partial(numba.njit, cache=True)
 
@@ -494,7 +494,7 @@ def rsa_cloud(
     x = np.zeros((len(r), 3))
     placed = _rsa_kernel(kind, prm, r, int(seed) % (2**31), int(max_attempts), 2.0 * r.max(), x)
     if placed < len(r):
-        frac = float(np.sum(4 / 3 * np.pi * cube(r[:placed])) / region.volume)
+        frac = float(np.sum(sphere_volume(r[:placed])) / region.volume)
         raise ValueError(
             f"rsa_cloud: placed {placed} of {len(r)} spheres in {region} (solid fraction "
             f"{frac:.3f}; RSA jams near 0.38); enlarge the region or use lattice_cloud"
@@ -1691,7 +1691,7 @@ def _layer_cloud(spec, r_new, seed, up, planes, h_surf, normal_mode):
     c = spec.container
     r_max = spec.radius.r_max
     h_min = h_surf + 0.5 * r_max
-    solids = float(np.sum(4.0 / 3.0 * np.pi * cube(r_new)))
+    solids = float(np.sum(sphere_volume(r_new)))
     grow = 1.0
     for _ in range(12):
         if normal_mode:
@@ -1710,7 +1710,7 @@ def _layer_cloud(spec, r_new, seed, up, planes, h_surf, normal_mode):
             # tilted trough: RSA in a box, keep what lies inside the trough above the surface
             n_box = int(len(r_new) * region.volume / max(_trough_volume(spec, region, h_min), 1e-9))
             n_box = max(n_box, len(r_new))
-            vol_box = n_box * float(np.mean(4.0 / 3.0 * np.pi * cube(r_new)))
+            vol_box = n_box * float(np.mean(sphere_volume(r_new)))
             if vol_box / region.volume > spec.cloud_solid_fraction:
                 raise ValueError("region too small")
             rng = np.random.default_rng(seed)

@@ -186,9 +186,9 @@ class Material:
         faster (``contact_laws.no_tension_restitution``): 0.253 for e = 0.1, 0.325 for 0.2.
         1 when e is None or 1. What a rebound measured on grains, or another code's restitution
         whose dashpot may pull, compares with."""
-        from .contact_laws import no_tension_restitution
+        from .contact_laws import rebound_restitution
 
-        return no_tension_restitution(self.damping_ratio)
+        return 1.0 if self.restitution is None else rebound_restitution(self.restitution)
 
     def to_dict(self) -> dict:
         """Plain-dict form (nested dataclasses as dicts)."""

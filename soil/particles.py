@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .portable import cube
+from .portable import sphere_volume
 
 __all__ = ["Particles"]
 
@@ -95,7 +95,7 @@ class Particles:
                 f"({len(densities)})"
             )
         rho = np.asarray(densities, np.float64)[self.material]
-        self.mass[:] = 4.0 / 3.0 * np.pi * cube(self.radius) * rho
+        self.mass[:] = sphere_volume(self.radius) * rho
         self.inv_mass[:] = 1.0 / self.mass
         self.inertia[:] = 0.4 * self.mass * self.radius**2
         self.inv_inertia[:] = np.where(self.rotation_blocked, 0.0, 1.0 / self.inertia)

@@ -39,6 +39,7 @@ from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
 from crashdem.diagnosis.mismatch import align, onset_time
 from crashdem.signal import Signal
+from soil.contact_laws import rebound_restitution
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
            "REPLICATE", "STIFFER", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS",
@@ -1685,19 +1686,13 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
                                                          if derived else {})}
 
 
-def _rebound(e: float) -> float:
-    from soil.contact_laws import damping_ratio, no_tension_restitution
-
-    return float(no_tension_restitution(damping_ratio(min(max(float(e), 1e-12), 1.0))))
-
-
 #: searched parameter -> (derived name, unit, function, what it is): quantities a user compares
 #: with another code or a measurement. The restitution searched is the nominal one of crashdem's
 #: dashpot (Yade's betan convention), whose contact never pulls; a head-on contact of it
 #: rebounds faster (``soil.Material.rebound_restitution``), and a code whose dashpot may pull
 #: has nominal = rebound
 DERIVED: dict[str, tuple[str, str, Any, str]] = {
-    "restitution": ("rebound_restitution", "1", _rebound,
+    "restitution": ("rebound_restitution", "1", rebound_restitution,
                     "the rebound ratio of a head-on grain contact at this nominal restitution "
                     "(crashdem's contact force never pulls, so it opens early; in a code whose "
                     "dashpot may pull, nominal and rebound restitution are the same)"),

@@ -95,6 +95,11 @@ def test_no_tension_restitution_exceeds_the_nominal_one():
     for bad in (-0.1, float("nan"), float("inf")):
         with pytest.raises(ValueError, match="zeta"):
             cl.no_tension_restitution(bad)
+    assert cl.rebound_restitution(0.2) == cl.no_tension_restitution(cl.damping_ratio(0.2))
+    assert cl.rebound_restitution(1.0) == 1.0
+    for bad in (0.0, -0.5, 1.5, float("nan")):
+        with pytest.raises(ValueError, match=r"restitution=.*\(0, 1\]"):
+            cl.rebound_restitution(bad)
 
 
 def test_damping_coefficient_and_duration():
