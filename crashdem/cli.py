@@ -91,22 +91,25 @@ def _cmd_cache(args: argparse.Namespace) -> int:
 
     base = Path(args.root or os.environ.get("CRASHDEM_CACHE") or "~/.cache/crashdem")
     base = base.expanduser().absolute()
-    runs = base / "runs"
+    trees = {"runs": runcache.run_tree(base / "runs"),
+             "packings": runcache.packing_tree(base / "packings")}
     if args.cache_command == "info":
-        use = runcache.usage(runs)
+        uses = {name: runcache.usage(tree) for name, tree in trees.items()}
         others = {d.name: dict(zip(("files", "bytes"), _dir_bytes(d)))
-                  for d in sorted(base.iterdir()) if d.is_dir() and d.name != "runs"} \
+                  for d in sorted(base.iterdir()) if d.is_dir() and d.name not in trees} \
             if base.is_dir() else {}
         if args.json:
-            print(json.dumps({"root": str(base), "runs": use, "other": others}, indent=1))
+            print(json.dumps({"root": str(base), **uses, "other": others}, indent=1))
             return 0
         print(f"crashdem cache {base}")
-        print(f"runs: {use['entries']} entries, {_human(use['bytes'])} "
-              f"(this code: {use['current']})")
-        for fp, v in sorted(use["versions"].items(), key=lambda kv: -kv[1]["newest_use"]):
-            age = (time.time() - v["newest_use"]) / 86400.0
-            print(f"  {fp}{' (this code)' if v['current'] else ' (other code)'}: "
-                  f"{v['entries']} entries, {_human(v['bytes'])}, last used {age:.1f} days ago")
+        for name, use in uses.items():
+            what = "runs" if name == "runs" else "beds"
+            print(f"{name}: {use['entries']} {what}, {_human(use['bytes'])} "
+                  f"(this code: {use['current']})")
+            for fp, v in sorted(use["versions"].items(), key=lambda kv: -kv[1]["newest_use"]):
+                age = (time.time() - v["newest_use"]) / 86400.0
+                print(f"  {fp}{' (this code)' if v['current'] else ' (other code)'}: "
+                      f"{v['entries']} {what}, {_human(v['bytes'])}, last used {age:.1f} days ago")
         for name, v in others.items():
             print(f"{name}: {v['files']} files, {_human(v['bytes'])}")
         cap = os.environ.get(runcache.MAX_ENV)
@@ -119,12 +122,16 @@ def _cmd_cache(args: argparse.Namespace) -> int:
                                                                        "--max-size")
     if args.older_than is not None and not (args.older_than >= 0):
         raise ValueError(f"--older-than: {args.older_than} is out of range; allowed: >= 0 days")
-    out = runcache.prune(runs, max_bytes=max_bytes, stale=args.stale,
+    chosen = [trees[name] for name in (("runs", "packings") if args.only is None
+                                       else (args.only,))]
+    out = runcache.prune(chosen, max_bytes=max_bytes, stale=args.stale,
                          older_than_s=None if args.older_than is None
                          else args.older_than * 86400.0, dry_run=args.dry_run)
     verb = "would remove" if args.dry_run else "removed"
-    print(f"{verb} {len(out['removed'])} run entries ({_human(out['freed_bytes'])}); "
-          f"kept {out['kept_entries']} ({_human(out['kept_bytes'])})")
+    n_beds = sum(1 for f in out["removed"] if Path(f).is_relative_to(trees["packings"].root))
+    print(f"{verb} {len(out['removed']) - n_beds} run entries and {n_beds} beds "
+          f"({_human(out['freed_bytes'])}); kept {out['kept_entries']} "
+          f"({_human(out['kept_bytes'])})")
     if out["over_bytes"]:
         print(f"still {_human(out['over_bytes'])} over --max-size: those entries were used "
               f"within the last {runcache.GRACE_S / 3600:.0f} h")
@@ -254,18 +261,21 @@ def build_parser() -> argparse.ArgumentParser:
     ensemble.add_cluster_arguments(d, set_option=False)
     d.set_defaults(func=_cmd_diagnose)
 
-    c = sub.add_parser("cache", help="show or prune the cache of finished runs and beds")
+    c = sub.add_parser("cache", help="show or prune the caches of finished runs and of "
+                                     "deposited beds")
     c.add_argument("--root", default=None,
                    help="the crashdem cache directory (default: $CRASHDEM_CACHE, else "
                         "~/.cache/crashdem)")
     csub = c.add_subparsers(dest="cache_command", required=True)
     ci = csub.add_parser("info", help="entries and bytes per cache and per code version")
     ci.add_argument("--json", action="store_true")
-    cp = csub.add_parser("prune", help="evict run entries (the beds are kept); entries used "
-                                       "in the last hour always stay")
+    cp = csub.add_parser("prune", help="evict finished runs and deposited beds (runs/ and "
+                                       "packings/); entries used in the last hour always stay")
     cp.add_argument("--max-size", default=None, metavar="SIZE",
                     help="evict the least recently used entries (other code versions first) "
-                         "until the runs fit, e.g. 20G, 500M, 2GiB")
+                         "until the runs and beds together fit, e.g. 20G, 500M, 2GiB")
+    cp.add_argument("--only", choices=("runs", "packings"), default=None,
+                    help="prune only the finished runs or only the beds (default: both)")
     cp.add_argument("--stale", action="store_true",
                     help="evict every entry made by another version of the code")
     cp.add_argument("--older-than", type=float, default=None, metavar="DAYS",

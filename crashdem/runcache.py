@@ -51,6 +51,7 @@ API
 from __future__ import annotations
 
 import copy
+import dataclasses
 import functools
 import hashlib
 import json
@@ -239,15 +240,46 @@ def _max_from_env() -> int | None:
     return parse_size(text, f"${MAX_ENV}") if text else None
 
 
-def _entries(root: Path) -> list[tuple[Path, int, float]]:
-    """Every ``<root>/<fingerprint>/<key>.h5``: (path, bytes, last use), vanished ones left out."""
+@dataclasses.dataclass(frozen=True)
+class Tree:
+    """A cache laid out as ``<root>/<code fingerprint>/<entry>``: the run cache
+    (:func:`run_tree`) and the shared packing cache of the diagnoses (:func:`packing_tree`).
+
+    ``current``: the fingerprint of this code's entries; ``pattern``: the entries' file names;
+    ``temporary``: left-overs of killed writes; ``companions``: suffixes of files that belong
+    to an entry (removed with it: a bed's build lock)."""
+
+    root: Path
+    current: str
+    pattern: str = "*.h5"
+    temporary: tuple[str, ...] = (".*.tmp",)
+    companions: tuple[str, ...] = ()
+
+
+def run_tree(root: str | os.PathLike) -> Tree:
+    """The run cache under ``root`` (``<root>/<code_fingerprint()>/<run key>.h5``)."""
+    return Tree(Path(root).expanduser().absolute(), code_fingerprint())
+
+
+def packing_tree(root: str | os.PathLike) -> Tree:
+    """The packing cache under ``root`` (``<root>/<soil.packing.code_fingerprint()>/
+    packing-<spec hash>.h5``, ``crashdem.run.packing_cache``), with each bed's build lock."""
+    from soil.packing import code_fingerprint as soil_fingerprint
+
+    return Tree(Path(root).expanduser().absolute(), soil_fingerprint(), "packing-*.h5",
+                ("packing-*.h5.tmp*",), (".lock",))
+
+
+def _entries(root: Path, pattern: str = "*.h5") -> list[tuple[Path, int, float]]:
+    """Every ``<root>/<fingerprint>/<pattern>``: (path, bytes, last use), vanished ones left
+    out."""
     out = []
     if not root.is_dir():
         return out
     for d in root.iterdir():
         if not d.is_dir():
             continue
-        for f in d.glob("*.h5"):
+        for f in d.glob(pattern):
             try:
                 st = f.stat()
             except OSError:
@@ -256,13 +288,14 @@ def _entries(root: Path) -> list[tuple[Path, int, float]]:
     return out
 
 
-def usage(root: str | os.PathLike) -> dict[str, Any]:
-    """What the run cache under ``root`` holds, per code version: entries, bytes, the newest
-    and oldest use (Unix time), and which version is this code's (``current``)."""
-    root = Path(root).expanduser().absolute()
-    current = code_fingerprint()
+def usage(root: str | os.PathLike | Tree) -> dict[str, Any]:
+    """What the cache under ``root`` (a run cache, or any :class:`Tree`) holds, per code
+    version: entries, bytes, the newest and oldest use (Unix time), and which version is this
+    code's (``current``)."""
+    tree = root if isinstance(root, Tree) else run_tree(root)
+    current = tree.current
     versions: dict[str, dict[str, Any]] = {}
-    for f, size, used in _entries(root):
+    for f, size, used in _entries(tree.root, tree.pattern):
         v = versions.setdefault(f.parent.name, {"entries": 0, "bytes": 0, "newest_use": used,
                                                 "oldest_use": used,
                                                 "current": f.parent.name == current})
@@ -270,22 +303,23 @@ def usage(root: str | os.PathLike) -> dict[str, Any]:
         v["bytes"] += size
         v["newest_use"] = max(v["newest_use"], used)
         v["oldest_use"] = min(v["oldest_use"], used)
-    return {"root": str(root), "current": current, "versions": versions,
+    return {"root": str(tree.root), "current": current, "versions": versions,
             "entries": sum(v["entries"] for v in versions.values()),
             "bytes": sum(v["bytes"] for v in versions.values())}
 
 
-def prune(root: str | os.PathLike, *, max_bytes: int | None = None, stale: bool = False,
-          older_than_s: float | None = None, grace_s: float = GRACE_S,
+def prune(root: str | os.PathLike | Tree | list[Tree], *, max_bytes: int | None = None,
+          stale: bool = False, older_than_s: float | None = None, grace_s: float = GRACE_S,
           protect: tuple[Path, ...] = (), dry_run: bool = False,
           now: float | None = None) -> dict[str, Any]:
-    """Evict run-cache entries under ``root``.
+    """Evict cache entries under ``root``: a run cache's directory, a :class:`Tree`, or a list
+    of them pruned as one (``max_bytes`` then caps their total).
 
     ``stale``: every entry of another code version; ``older_than_s``: every entry not used for
     that long; ``max_bytes``: then the least recently used entries, other code versions' first,
     until the rest fits. An entry used within ``grace_s`` or named in ``protect`` stays
     whatever the criteria, so the cache can stay above ``max_bytes`` (``over_bytes``).
-    Left-over temporary files of killed copies older than ``grace_s`` are removed, and code
+    Left-over temporary files of killed writes older than ``grace_s`` are removed, and code
     version directories left empty. ``dry_run`` removes nothing and reports the same.
     Returns ``{"removed": [paths], "freed_bytes", "kept_entries", "kept_bytes",
     "over_bytes"}``."""
@@ -293,45 +327,54 @@ def prune(root: str | os.PathLike, *, max_bytes: int | None = None, stale: bool 
         raise ValueError(f"max_bytes: {max_bytes} is out of range; allowed: >= 0")
     if older_than_s is not None and older_than_s < 0:
         raise ValueError(f"older_than_s: {older_than_s} is out of range; allowed: >= 0")
-    root = Path(root).expanduser().absolute()
+    if isinstance(root, list):
+        trees = root
+    else:
+        trees = [root if isinstance(root, Tree) else run_tree(root)]
     now = time.time() if now is None else now
-    current = code_fingerprint()
     keep = {Path(p).absolute() for p in protect}
-    items = sorted(_entries(root), key=lambda e: (e[0].parent.name == current, e[2], str(e[0])))
-    removed: list[tuple[Path, int]] = []
-    kept: list[tuple[Path, int]] = []
+    items = []  # (path, bytes, last use, of this code, tree)
+    for tree in trees:
+        items += [(f, size, used, f.parent.name == tree.current, tree)
+                  for f, size, used in _entries(tree.root, tree.pattern)]
+    items.sort(key=lambda e: (e[3], e[2], str(e[0])))
+    removed: list[tuple[Path, int, Tree]] = []
+    kept: list[tuple[Path, int, float, Tree]] = []
 
     def evictable(f: Path, used: float) -> bool:
         return f.absolute() not in keep and now - used >= grace_s
 
-    total = sum(size for _, size, _ in items)
-    for f, size, used in items:  # first the criteria of their own
-        if evictable(f, used) and ((stale and f.parent.name != current)
+    total = sum(e[1] for e in items)
+    for f, size, used, current, tree in items:  # first the criteria of their own
+        if evictable(f, used) and ((stale and not current)
                                    or (older_than_s is not None and now - used >= older_than_s)):
-            removed.append((f, size))
+            removed.append((f, size, tree))
             total -= size
         else:
-            kept.append((f, size, used))
+            kept.append((f, size, used, tree))
     if max_bytes is not None:  # then the least recently used, other versions first
         rest = []
-        for f, size, used in kept:
+        for f, size, used, tree in kept:
             if total > max_bytes and evictable(f, used):
-                removed.append((f, size))
+                removed.append((f, size, tree))
                 total -= size
             else:
-                rest.append((f, size, used))
+                rest.append((f, size, used, tree))
         kept = rest
     if not dry_run:
-        for f, _ in removed:
-            try:
-                f.unlink()
-            except FileNotFoundError:
-                pass
-        if root.is_dir():
-            for d in root.iterdir():
+        for f, _, tree in removed:
+            for g in (f, *(f.with_suffix(c) for c in tree.companions)):
+                try:
+                    g.unlink()
+                except FileNotFoundError:
+                    pass
+        for tree in trees:
+            if not tree.root.is_dir():
+                continue
+            for d in tree.root.iterdir():
                 if not d.is_dir():
                     continue
-                for t in d.glob(".*.tmp"):
+                for t in (t for pat in tree.temporary for t in d.glob(pat)):
                     try:
                         if now - t.stat().st_mtime >= grace_s:
                             t.unlink()
@@ -341,8 +384,8 @@ def prune(root: str | os.PathLike, *, max_bytes: int | None = None, stale: bool 
                     d.rmdir()  # only when empty
                 except OSError:
                     pass
-    return {"removed": [str(f) for f, _ in removed],
-            "freed_bytes": sum(size for _, size in removed),
+    return {"removed": [str(f) for f, _, _ in removed],
+            "freed_bytes": sum(size for _, size, _ in removed),
             "kept_entries": len(kept), "kept_bytes": total,
             "over_bytes": max(0, total - max_bytes) if max_bytes is not None else 0}
 

@@ -1377,11 +1377,13 @@ class Packing:
         """Porosity of a control box or cylinder [-] (exact cut-sphere volumes)."""
         return porosity(self.x, self.radius, region)
 
-    def save(self, path: str | os.PathLike) -> Path:
+    def save(self, path: str | os.PathLike, engine: str | None = None) -> Path:
         """Write to HDF5 (datasets ``x``, ``radius``, ``material`` with ``unit``; JSON attributes
         ``materials``, ``spec``, ``info``, ``porosity_region``; ``seed``, ``porosity``,
-        ``content_hash``, ``spec_hash``, ``format_version``).  Written to a temporary file and
-        renamed, so a crash never leaves a half file under the final name."""
+        ``content_hash``, ``spec_hash``, ``format_version``; ``engine`` when given: the
+        :func:`code_fingerprint` of the engine that deposited the bed, which :func:`cached`
+        checks).  Written to a temporary file and renamed, so a crash never leaves a half file
+        under the final name."""
         import h5py
 
         path = Path(path)
@@ -1406,6 +1408,8 @@ class Packing:
             f.attrs["seed"] = int(self.seed)
             f.attrs["porosity"] = float(self.porosity)
             f.attrs["content_hash"] = self.content_hash
+            if engine is not None:
+                f.attrs["engine"] = str(engine)
         os.replace(tmp, path)
         return path
 
@@ -1579,14 +1583,41 @@ def _build_lock(path: Path):
         os.close(fd)
 
 
-def _load_cached(path: Path, h: str) -> Packing | None:
+def stored_engine(path: str | os.PathLike) -> str | None:
+    """The ``engine`` attribute of a packing file (the :func:`code_fingerprint` of the engine
+    that deposited it, written by :func:`cached`), None when the file has none or cannot be
+    read."""
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            v = f.attrs.get("engine")
+    except OSError:
+        return None
+    if v is None:
+        return None
+    return v.decode() if isinstance(v, bytes) else str(v)
+
+
+def _load_cached(path: Path, h: str, engine: str) -> Packing | None:
     if not path.exists():
         return None
     try:
+        stored = stored_engine(path)
+        if stored != engine:
+            # a bed deposited by another engine (or before beds recorded theirs) is another
+            # realisation of the same spec: reusing it would make this run differ from the same
+            # run on a fresh machine
+            warnings.warn(f"cached: {path} was deposited by "
+                          f"{'soil engine ' + stored if stored else 'an unrecorded soil engine'}"
+                          f", this is {engine}; rebuilding", RuntimeWarning, 3)
+            return None
         pk = Packing.load(path)
         if pk.spec.get("__hash__") == h:
             return pk
         warnings.warn(f"cached: {path} has another spec hash, rebuilding", RuntimeWarning, 3)
+    except FileNotFoundError:  # removed (pruned) between the test and the read
+        return None
     except ValueError as exc:
         warnings.warn(f"cached: {exc}; rebuilding", RuntimeWarning, stacklevel=3)
     return None
@@ -1597,8 +1628,13 @@ def cached(
 ) -> Packing:
     """Return the packing of ``spec``, building and saving it only when not already cached.
 
-    The file is ``<directory>/packing-<spec hash[:20]>.h5``; a file is reused only when its
-    stored spec hash equals ``spec.hash()`` and its content hash verifies. A build holds
+    The file is ``<directory>/packing-<spec hash[:20]>.h5``; a file is reused only when it was
+    deposited by this soil engine (its ``engine`` attribute equals :func:`code_fingerprint`:
+    the same spec deposited by another version of the engine, or by this one on NumPy's SIMD
+    paths before ``soil.portable``, is another realisation), its stored spec hash equals
+    ``spec.hash()`` and its content hash verifies; otherwise it is rebuilt with a warning. A
+    load refreshes the file's modification time, the last use ``crashdem cache prune`` goes
+    by. A build holds
     ``packing-<hash>.lock`` (``_build_lock``), so concurrent callers sharing ``directory``
     deposit the bed once.
 
@@ -1613,16 +1649,27 @@ def cached(
         Passed to :func:`build`.
     """
     h = spec.hash()
+    engine = code_fingerprint()
     path = Path(directory).expanduser() / f"packing-{h[:20]}.h5"
-    if not rebuild and (pk := _load_cached(path, h)) is not None:
+    if not rebuild and (pk := _load_cached(path, h, engine)) is not None:
+        _touch(path)
         return pk
     with _build_lock(path):
         # another process may have built it while this one waited for the lock
-        if not rebuild and (pk := _load_cached(path, h)) is not None:
+        if not rebuild and (pk := _load_cached(path, h, engine)) is not None:
+            _touch(path)
             return pk
         pk = build(spec, progress=progress)
-        pk.save(path)
+        pk.save(path, engine=engine)
     return pk
+
+
+def _touch(path: Path) -> None:
+    """Mark a cached bed as used now (its modification time), for ``crashdem cache prune``."""
+    try:
+        os.utime(path)
+    except OSError:  # read-only cache or removed meanwhile: the bed was still served
+        pass
 
 
 # ---------------------------------------------------------------------------------------------

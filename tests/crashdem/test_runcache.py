@@ -266,34 +266,63 @@ def test_a_hit_is_a_use_and_a_capped_cache_evicts_on_store(tmp_path, monkeypatch
 
 
 def test_the_cache_command_shows_and_prunes(tmp_path, capsys):
+    """``crashdem cache`` over both caches: the finished runs (``runs/``) and the diagnoses'
+    shared beds (``packings/<soil engine fingerprint>/``, ``crashdem.run.packing_cache``).
+    Oracle: which files each option removes (a bed with its build lock), the counts printed,
+    and exit code 2 with the option named for bad input."""
     import json
+    import os
     import time
 
     from crashdem.cli import main
+    from soil.packing import code_fingerprint as soil_fingerprint
 
     cur = code_fingerprint()
     now = time.time()
     p = _fake_entries(tmp_path / "runs", {(cur, "a"): (2000, 10 * 86400.0),
                                           (cur, "b"): (3000, 7200.0),
                                           ("0123456789abcdef", "c"): (500, 86400.0)}, now)
-    (tmp_path / "packings").mkdir()
-    (tmp_path / "packings" / "bed.h5").write_bytes(b"y" * 700)
+    soil = soil_fingerprint()
+    beds = _fake_entries(tmp_path / "packings", {(soil, "packing-new"): (700, 7200.0),
+                                                 (soil, "packing-old"): (800, 20 * 86400.0),
+                                                 ("fedcba9876543210", "packing-x"): (900, 60.0)},
+                         now)
+    lock = beds[soil, "packing-old"].with_suffix(".lock")
+    lock.write_bytes(b"")
+    stray = tmp_path / "packings" / soil / "packing-new.h5.tmp99"
+    stray.write_bytes(b"half")
+    os.utime(stray, (now - 86400.0, now - 86400.0))
+    (tmp_path / "exports").mkdir()
+    (tmp_path / "exports" / "thing.bin").write_bytes(b"z" * 70)
     assert main(["cache", "--root", str(tmp_path), "info", "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["runs"]["entries"] == 3 and info["runs"]["bytes"] == 5500
-    assert info["other"]["packings"] == {"files": 1, "bytes": 700}
+    assert info["packings"]["entries"] == 3 and info["packings"]["bytes"] == 2400
+    assert info["packings"]["current"] == soil
+    assert info["packings"]["versions"][soil]["current"]
+    assert not info["packings"]["versions"]["fedcba9876543210"]["current"]
+    assert info["other"] == {"exports": {"files": 1, "bytes": 70}}
     assert main(["cache", "--root", str(tmp_path), "info"]) == 0
     text = capsys.readouterr().out
-    assert "3 entries" in text and "(other code)" in text and "packings: 1 files" in text
+    assert "runs: 3 runs" in text and "(other code)" in text and "packings: 3 beds" in text
     assert main(["cache", "--root", str(tmp_path), "prune", "--stale", "--dry-run"]) == 0
-    assert "would remove 1 run entries" in capsys.readouterr().out
+    # the other engine's bed was used a minute ago: it stays whatever the criteria
+    assert "would remove 1 run entries and 0 beds" in capsys.readouterr().out
     assert p["0123456789abcdef", "c"].exists()
     assert main(["cache", "--root", str(tmp_path), "prune", "--older-than", "5"]) == 0
-    assert "removed 1 run entries" in capsys.readouterr().out
+    assert "removed 1 run entries and 1 beds" in capsys.readouterr().out
     assert not p[cur, "a"].exists() and p[cur, "b"].exists()
-    assert main(["cache", "--root", str(tmp_path), "prune", "--max-size", "1k"]) == 0
+    assert not beds[soil, "packing-old"].exists() and not lock.exists()
+    assert beds[soil, "packing-new"].exists() and not stray.exists()
+    assert main(["cache", "--root", str(tmp_path), "prune", "--only", "runs",
+                 "--max-size", "1k"]) == 0
     assert not p["0123456789abcdef", "c"].exists() and not p[cur, "b"].exists()
-    assert (tmp_path / "packings" / "bed.h5").exists()          # the beds are kept
+    assert beds[soil, "packing-new"].exists()                  # --only runs keeps the beds
+    assert main(["cache", "--root", str(tmp_path), "prune", "--max-size", "1k"]) == 0
+    assert "removed 0 run entries and 1 beds" in capsys.readouterr().out.splitlines()[-1]
+    assert not beds[soil, "packing-new"].exists()
+    assert beds["fedcba9876543210", "packing-x"].exists()      # used within the hour
+    assert (tmp_path / "exports" / "thing.bin").exists()       # not a cache of crashdem's
     # bad input: a clear message naming the option, exit code 2
     assert main(["cache", "--root", str(tmp_path), "prune"]) == 2
     assert "--max-size, --stale, --older-than" in capsys.readouterr().err

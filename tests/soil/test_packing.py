@@ -283,6 +283,45 @@ def test_cached_deposits_a_bed_once_for_concurrent_callers(tmp_path, monkeypatch
     assert len(calls) == 2
 
 
+def test_cached_rebuilds_a_bed_another_engine_deposited(tmp_path, monkeypatch):
+    """A cached bed is served only to the soil engine that deposited it: the same spec
+    deposited by another version of the engine (or, before ``soil.portable``, by this one on
+    NumPy's AVX-512 paths) is another realisation, and reusing it made a run differ from the
+    same run on a fresh machine. Oracle: the build count, the ``engine`` attribute and the
+    warning, for a bed of this engine, of another one and of one recording none; a served bed's
+    modification time is refreshed (the last use ``crashdem cache prune`` goes by)."""
+    import os
+
+    spec = pk.PackingSpec(container=pk.BoxRegion((0, 0, 0), (1, 1, 2)),
+                          materials=(_soil(),), layers=(pk.LayerSpec(1.0),),
+                          radius=pk.RadiusDistribution(0.05, 0.2))
+    toy = dataclasses.replace(_toy_packing(), spec={"__hash__": spec.hash()})
+    calls = []
+
+    def build(s, progress=None):
+        calls.append(s.hash())
+        return toy
+
+    monkeypatch.setattr(pk, "build", build)
+    d = tmp_path / "beds"
+    path = d / f"packing-{spec.hash()[:20]}.h5"
+    pk.cached(spec, d)
+    assert len(calls) == 1 and pk.stored_engine(path) == pk.code_fingerprint()
+    os.utime(path, (1.0e9, 1.0e9))
+    got = pk.cached(spec, d)  # this engine's bed: served, and marked as used
+    assert len(calls) == 1 and np.array_equal(got.x, toy.x)
+    assert path.stat().st_mtime > 1.0e9 + 1.0e6
+    toy.save(path, engine="0123456789abcdef")  # another engine's
+    with pytest.warns(RuntimeWarning, match="soil engine 0123456789abcdef"):
+        pk.cached(spec, d)
+    assert len(calls) == 2 and pk.stored_engine(path) == pk.code_fingerprint()
+    toy.save(path)  # written before beds recorded their engine
+    assert pk.stored_engine(path) is None
+    with pytest.warns(RuntimeWarning, match="an unrecorded soil engine"):
+        pk.cached(spec, d)
+    assert len(calls) == 3 and pk.stored_engine(path) == pk.code_fingerprint()
+
+
 def test_code_fingerprint_follows_the_engine_and_its_compilers(tmp_path, monkeypatch):
     """The name a shared cache keeps its beds under is stable for one install and changes
     with any byte of the soil engine's modules and with the numba or numpy version (each can
