@@ -171,12 +171,12 @@ class Material:
         Notes
         -----
         Linear spring-dashpot restitution, e.g. Schwager & Poeschel (2007) / Yade
-        ``Ip2_FrictMat_FrictMat_MindlinPhys`` betan convention for a linear spring.
+        ``Ip2_FrictMat_FrictMat_MindlinPhys`` betan convention for a linear spring; the value
+        the contact kernels use (``contact_laws.damping_ratio``).
         """
-        if self.restitution is None or self.restitution >= 1.0:
-            return 0.0
-        le = math.log(self.restitution)
-        return -le / math.sqrt(math.pi**2 + le**2)
+        from .contact_laws import damping_ratio
+
+        return 0.0 if self.restitution is None else damping_ratio(self.restitution)
 
     @property
     def rebound_restitution(self) -> float:
