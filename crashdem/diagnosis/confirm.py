@@ -262,6 +262,9 @@ class _Decision:
     #: a rival that out-ranks the effect about to be named in likelihood without being
     #: decisive (``_Confirmation._likelihood_rival``): then nothing is named
     contested: dict[str, Any] | None = None
+    #: screened candidates whose full run was decisive but which do not hold on the search
+    #: tier (``_Confirmation._search_support``), with why: not named
+    unheld: dict[str, str] = field(default_factory=dict)
 
 
 class _Confirmation:
@@ -834,8 +837,16 @@ class _Confirmation:
                 self.model_free or _not_decisively_worse(screened, floor)):
             confirmed, best = screened["hypothesis"], screened
         claim_stood = confirmed is not None
+        # a screened candidate of a searched effect (neither the claim nor a promoted level,
+        # which was decisive there) meets the claim's rule on the search tier too
+        unheld = {} if tier is None or self.model_free else {
+            r["hypothesis"]: why for r in best_h.values()
+            if r is not screened and "search_value" not in r and _decisive(r, floor)
+            and (why := self._search_support(r["hypothesis"], tier,
+                                             "a screened candidate")) is not None}
         rivals = [] if self.model_free else sorted(
-            (r for r in best_h.values() if r is not screened and _decisive(r, floor)),
+            (r for r in best_h.values() if r is not screened and _decisive(r, floor)
+             and r["hypothesis"] not in unheld),
             key=lambda r: -r["delta_bic_vs_reference"])
         ambiguous = None
         if rivals:
@@ -862,7 +873,7 @@ class _Confirmation:
                                          "value": contested.get("value")}}
                 confirmed, best = None, full.rows[0]
         return _Decision(confirmed, best, screened, claim_stood, ambiguous, best_h, unsupported,
-                         contested)
+                         contested, unheld)
 
     def _likelihood_rival(self, name: str, run: Row,
                           tier: _SearchTier | None) -> dict[str, Any] | None:
@@ -905,7 +916,8 @@ class _Confirmation:
                 "own_score": float(own["score"]),
                 **({"value": float(r["search_value"])} if "search_value" in r else {})}
 
-    def _search_support(self, name: str, tier: _SearchTier) -> str | None:
+    def _search_support(self, name: str, tier: _SearchTier,
+                        who: str = "the screening's claim") -> str | None:
         """None when the screening's claim ``name`` holds on the search tier -- its best located
         search run not decisively worse than that tier's best replicate (Delta BIC within
         ``ACCEPT_MARGIN`` of it, score within ``CONFIRM_MIN_GAIN``), or ``name`` not searched or
@@ -915,17 +927,21 @@ class _Confirmation:
         although another packing of the coarse bed fits the recording better than any level of
         it. Measured at the default resolution (0.075 m grains) on the Yade floor recording 12:
         layering claimed by the screening, its full run 28.2 over the reference, its best coarse
-        level 9.4 against the best coarse replicate's 26.2 -- named wrongly before."""
+        level 9.4 against the best coarse replicate's 26.2 -- named wrongly before. ``decide``
+        asks the same of a screened candidate that is not the claim (``who`` words the
+        line): its full run, too, has only the reference to beat."""
         if name not in self.searched or not any(r["hypothesis"] == REPLICATE for r in tier.rows):
             return None
         f = tier.floor
         run = self.standing([r for r in tier.rows[1:] if r["hypothesis"] == name], f).get(name)
         if run is None:
-            return ("the screening's claim, but no located level of it ran on the search "
-                    "simulator")
+            ran = any(r["hypothesis"] == name and "search_value" in r for r in tier.rows[1:])
+            return (f"{who}, but " + ("on the search simulator no level of it short of the end "
+                                      "where it fades stands for it" if ran else
+                                      "no level of it ran on the search simulator"))
         if _not_decisively_worse(run, f):
             return None
-        return (f"the screening's claim, but on the search simulator its best level "
+        return (f"{who}, but on the search simulator its best level "
                 f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC "
                 f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively "
                 f"worse than the best replicate packing there (Delta BIC "
@@ -951,6 +967,8 @@ class _Confirmation:
                 why = _contested_verdict(name, d.ambiguous, d.contested)
             elif r is not None and r is d.screened and d.unsupported:
                 why = d.unsupported
+            elif name in d.unheld:
+                why = d.unheld[name]
             elif r is not None and r is d.screened and d.claim_stood:
                 why = (f"the screening's claim stood (Delta BIC "
                        f"{r['delta_bic_vs_reference']:.1f}, score {r['score']:.3f}), but "

@@ -1681,3 +1681,54 @@ def test_each_form_reads_back_as_itself():
     for bad in ((("a", {}),), (("a", {}), ("a", {"k": 1}))):
         with pytest.raises(ValueError, match="FullSearch.interface_depth.forms"):
             replace(fs, forms=bad)
+
+
+@pytest.mark.parametrize("level_105, level_125, named, why", [
+    ((-2.9, 0.789), (35.0, 0.862), None, "no level of it short of the end where it fades"),
+    ((-2.9, 0.789), (5.0, 0.80), None, "its best level (1.05 m, Delta BIC -2.9"),
+    ((30.0, 0.85), (35.0, 0.862), "boundary_proximity", None)])
+def test_a_screened_candidate_must_also_hold_on_the_search_tier(level_105, level_125, named,
+                                                                why):
+    """Two-tier confirmation (the CLI at the drop scenario's own resolution): the screening
+    claims nothing, its two best candidates run in the full model, and the replicates ran on
+    the search tier. The floor candidate's full run (a 2.21 m floor, the screening's reflected
+    pulse: in the DEM a deeper bed, i.e. another deposition) beats the reference decisively
+    (15.1, score 0.860 against 0.832). On the search tier the floor's profile rises to its
+    fading end (1.25 m, 35.0) from -2.9 at 1.05 m, more than the replicates' scatter (11.8)
+    below it, so no located level stands for the floor; with the end level low (5.0) its best
+    located level (1.05 m, -2.9) is decisively worse than the best replicate (22.1). Either
+    way the candidate does not hold there, as the screening's claim would not, and nothing is
+    named. With a located level that holds (30.0, 0.85) it is named. Numbers:
+    ``validation/diagnose_cost.py`` (contact restitution 0.15 at 0.075 m grains), which named
+    ``boundary_proximity`` before (session 38)."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
+                                            _realisation_floor, _SearchTier)
+
+    tier_rows = ([_run("baseline", 0.0, 0.832)]
+                 + [_run("boundary_proximity", db, sc, v) for db, sc, v in
+                    ((-21.2, 0.529, 0.6), (-26.2, 0.551, 0.7), (-5.9, 0.681, 0.8),
+                     (-26.4, 0.602, 0.9), (*level_105, 1.05), (*level_125, 1.25))]
+                 + [_run("contact_damping", db, sc, v) for db, sc, v in
+                    ((38.4, 0.848, 0.1), (39.1, 0.846, 0.2), (39.0, 0.84, 0.3), (37.1, 0.84, 0.5))]
+                 + [_run(REPLICATE, db, sc) for db, sc in ((2.6, 0.742), (-0.5, 0.741),
+                                                           (-4.6, 0.645), (22.1, 0.780))])
+    tier = _SearchTier(tier_rows, _realisation_floor(tier_rows, 0.832), [], [], {})
+    rows = [_run("recalibration", 0.0, 0.608), _run("boundary_proximity", 15.1, 0.860),
+            _run("contact_damping", 8.4, 0.902)]
+    full = _FullTier(rows, 0.832, _realisation_floor(rows, 0.832))
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
+    c.searched, c.model_free, c.withdrawn = dict(FS), None, {}
+    d = c.decide(full, tier)
+    assert d.confirmed == named
+    if named is None:
+        line = d.unheld["boundary_proximity"]
+        assert line.startswith("a screened candidate, but on the search simulator ")
+        assert why in line
+        assert c.verdicts(full, d)["boundary_proximity"] == line
+        assert d.best is rows[0]
+    else:
+        assert d.unheld == {} and d.best is rows[1]
+    # one tier (the replicates among the full runs): the rule does not apply
+    assert c.decide(full).confirmed == "boundary_proximity"
