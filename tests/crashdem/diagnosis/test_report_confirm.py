@@ -1719,7 +1719,7 @@ def test_a_screened_candidate_must_also_hold_on_the_search_tier(level_105, level
     full = _FullTier(rows, 0.832, _realisation_floor(rows, 0.832))
     c = object.__new__(_Confirmation)
     c.rep = type("R", (), {"missing_physics": None, "fit": {}})()
-    c.searched, c.model_free, c.withdrawn = dict(FS), None, {}
+    c.searched, c.model_free = dict(FS), None
     d = c.decide(full, tier)
     assert d.confirmed == named
     if named is None:
