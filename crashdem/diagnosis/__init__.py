@@ -871,7 +871,8 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         baseline when the recording was filtered with another CFC class (``filter_check``);
         without them only a lower class can be matched
     catalog : the hypothesis set (default: the ``simulator``'s ``catalogue`` attribute, else
-        the drop catalogue, or ``catalogue.planar_catalogue(rom_base)`` for a planar
+        ``catalogue.drop_catalogue(rom_base)``, the drop catalogue with its floor searched above
+        the modelled one, or ``catalogue.planar_catalogue(rom_base)`` for a planar
         ``rom_base``)
 
     Returns
@@ -890,7 +891,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
     elif simulator is not None:
         cat = getattr(simulator, "catalogue", None) or catalogue.DROP
     else:
-        cat = catalogue.planar_catalogue(rom_base) if planar else catalogue.DROP
+        # the drop catalogue searches a floor above the screening model's modelled one
+        cat = catalogue.planar_catalogue(rom_base) if planar else \
+            catalogue.drop_catalogue(rom_base if rom_base is not None else RomParams())
     if channels is None:
         model_channels = PLANAR_CHANNELS if planar else ROM_CHANNELS
         channels = [c for c in model_channels if c in rec and c in base] if simulator is None \

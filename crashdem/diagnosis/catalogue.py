@@ -26,7 +26,7 @@ from typing import Any, Callable, Mapping
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH",
            "STIFFER_SOIL_FACTORS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
            "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
-           "Catalogue", "DROP", "planar_catalogue",
+           "Catalogue", "DROP", "drop_catalogue", "planar_catalogue",
            "friction_ratio_from_rolling", "rolling_from_friction_ratio"]
 
 #: friction ratio with free rotation and no rolling resistance (mu_r = 0) [-] (ROM assumption)
@@ -658,6 +658,36 @@ DROP = Catalogue(CATALOGUE, "drop", full_search=DROP_FULL_SEARCH,
                  full_unsupported={"structural_crush": "the drop sphere is rigid (crashdem.run "
                                                        "needs the glider's crushable nose)"})
 NAMES: tuple[str, ...] = DROP.names
+
+
+def drop_catalogue(base=None) -> Catalogue:
+    """The drop catalogue for the screening model ``base`` (``rom.RomParams``): ``DROP`` with
+    the floor of ``boundary_proximity`` searched above the modelled one only.
+
+    The entry is a floor *nearer* than modelled (or the modelled floor of another compliance),
+    so its depth runs from ``min(0.4 m, H / 5)`` to the modelled soil thickness
+    ``H = base.floor_depth``, where it vanishes (``off``). A floor farther than the bed is not
+    this effect: in the screening model it is the reflected pulse arriving later (a slower
+    soil, i.e. a recalibration), and in the full model it is another, deeper deposition.
+    The other entries are ``DROP``'s; ``base`` None gives ``DROP`` itself."""
+    if base is None:
+        return DROP
+    h_bed = float(base.floor_depth)
+    if not (math.isfinite(h_bed) and h_bed > 0.0):
+        raise ValueError(f"drop_catalogue: base.floor_depth={h_bed!r} must be a finite "
+                         "thickness > 0 [m]")
+    entries = []
+    for h in DROP.entries:
+        if h.name == "boundary_proximity":
+            f = h.parameters[0]
+            lo = min(f.lo, 0.2 * h_bed)
+            nominal = min(f.nominal, 0.6 * h_bed)
+            h = replace(h, parameters=(
+                replace(f, lo=lo, hi=h_bed, nominal=max(lo, nominal), off=h_bed),
+                *h.parameters[1:]))
+        entries.append(h)
+    return Catalogue(tuple(entries), DROP.model, DROP.excluded, DROP.full_search,
+                     DROP.full_unsupported)
 
 
 def combine(*names: str) -> Hypothesis:

@@ -48,3 +48,22 @@ def test_rolling_mapping_round_trip(mu):
 def test_parameter_spec_errors_name_the_field():
     with pytest.raises(ValueError, match=r"ParameterSpec\.x\.nominal=5.*\[0, 1\] \[m\]"):
         catalogue.ParameterSpec("x", "m", 0.0, 1.0, 5.0)
+
+
+@given(st.floats(min_value=0.1, max_value=20.0))
+def test_drop_catalogue_searches_a_floor_above_the_modelled_one(h_bed):
+    """``boundary_proximity`` is a floor nearer than modelled: for a screening model with a
+    bed of thickness H its depth runs up to H, where the effect is off, and starts no deeper
+    than H / 5; every other entry is the drop catalogue's."""
+    cat = catalogue.drop_catalogue(RomParams(floor_depth=h_bed))
+    f = cat.get("boundary_proximity").parameters[0]
+    assert f.name == "floor_depth"
+    assert f.hi == h_bed and f.off == h_bed
+    assert f.lo <= 0.2 * h_bed + 1e-12 and f.lo <= 0.4 and f.lo <= f.nominal <= f.hi
+    assert cat.names == catalogue.DROP.names
+    assert cat.full_search == catalogue.DROP.full_search
+    assert cat.full_unsupported == catalogue.DROP.full_unsupported
+    for name in cat.names:
+        if name != "boundary_proximity":
+            assert cat.get(name) is catalogue.DROP.get(name)
+    assert catalogue.drop_catalogue(None) is catalogue.DROP

@@ -196,6 +196,30 @@ def test_impact_speed_measured_from_a_velocity_alone(offset):
         0.0, abs=0.01)
 
 
+@pytest.mark.parametrize("truth_floor", [2.5, 0.8])
+def test_a_bed_deeper_than_modelled_is_not_a_nearer_floor(truth_floor):
+    """Oracle: the truth's floor, with the diagnosed model's bed 1.5 m thick
+    (``RomParams(floor_depth=1.5)``, as ``cli.rom_from_scenario`` gives for a scenario of
+    ``container.soil_depth = 1.5``). A floor nearer than modelled (0.8 m) is named
+    ``boundary_proximity`` within 15 %; a bed deeper than modelled (2.5 m) is not: the
+    entry is a floor nearer than modelled (``catalogue.drop_catalogue``), and the drop
+    catalogue's fixed 0.4-3 m range had named it there (Delta BIC 351)."""
+    from crashdem.diagnosis.generator import acquire
+
+    base = RomParams(floor_depth=1.5)
+    rng = np.random.default_rng(21)
+    rec = acquire(base.with_values({"floor_depth": truth_floor}), rng,
+                  trigger_offset=float(rng.uniform(-0.002, 0.002)))
+    rep = diagnose(simulate(base), rec, rom_base=base)
+    h = next(x for x in rep.hypotheses if x["name"] == "boundary_proximity")
+    assert h["parameters"]["floor_depth"] <= 1.5
+    if truth_floor < 1.5:
+        assert rep.missing_physics == "boundary_proximity", rep.decision
+        assert h["parameters"]["floor_depth"] == pytest.approx(truth_floor, rel=PARAM_RTOL)
+    else:
+        assert rep.missing_physics is None, rep.decision
+
+
 def test_working_rate_decimates_without_edge_transients():
     """A channel sampled above ``MAX_SAMPLE_RATE`` is decimated by the smallest integer factor
     that brings it to or below it; a free-fall ramp plus a 300 Hz tone (well inside the new
