@@ -233,6 +233,8 @@ class _SearchTier:
     promoted: list[Request]
     candidates: list[dict[str, Any]]
     verdicts: dict[str, str]
+    #: the run that stands for each effect on the search tier (``standing``)
+    standing: dict[str, Row] = field(default_factory=dict)
 
 
 @dataclass
@@ -299,6 +301,8 @@ class _Confirmation:
                            "the measured impact speed" if self.speed_measured else None)
         self.top_k = top_k
         self.skipped: dict[str, str] = {}
+        # screened candidates run at their search-tier level (``level_for_candidate``)
+        self.at_level: dict[str, Row] = {}
         self.candidates = self._candidates()
         # the search runs even when the recalibration explains the recording within the total
         # error: the screening model's error floor can hide what the full model resolves
@@ -331,18 +335,30 @@ class _Confirmation:
     def _candidates(self) -> list[dict[str, Any]]:
         """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
         screening claims missing physics or the recalibration leaves an unexplained residual;
-        one the full model cannot run is skipped (``skipped``) and the next takes its place."""
+        one the full model cannot run is skipped (``skipped``) and the next takes its place.
+        One whose full run would be the baseline simulation itself (every mapped parameter at
+        its ``off`` value, the nominal put in its place included: a speed offset of 0) is not
+        run either, unless it is the screening's claim, and keeps its place: the run would cost
+        a full simulation and could only repeat the baseline (measured at the default
+        resolution: the damping recording's second candidate, a 0 m/s offset, took a worker
+        48 s to give the reference's own score, 0.832, and Delta BIC -3.1)."""
         rep = self.rep
         lacks = rep.catalogue.full_unsupported
         out: list[dict[str, Any]] = []
         if rep.missing_physics is None and not rep.fit.get("recalibration_unexplained", False):
             return out
+        taken = 0
         for h in rep.hypotheses:
             missing = [e for e in h["name"].split("+") if e in lacks]
-            if h["name"] == RECALIBRATION.name or len(out) == self.top_k:
+            if h["name"] == RECALIBRATION.name or taken == self.top_k:
                 continue
             if missing:
                 self.skipped[h["name"]] = lacks[missing[0]]
+                continue
+            taken += 1
+            if h["name"] != rep.missing_physics and _runs_the_baseline(h, rep.catalogue):
+                self.skipped[h["name"]] = ("its full run would be the baseline simulation (every "
+                                           "mapped parameter at its off value)")
                 continue
             out.append(h)
         return out
@@ -743,7 +759,7 @@ class _Confirmation:
                 verdicts[n] = "not promoted: " + self._beyond_verdict(n, end, own, floor)
         return _SearchTier(rows, floor,
                            [(r["hypothesis"], dict(r["overrides"]), r["search_value"])
-                            for r in promote], candidates, verdicts)
+                            for r in promote], candidates, verdicts, best)
 
     def full_tier(self, sim: Simulator, tier: _SearchTier | None) -> _FullTier:
         """The full runs: recalibration, candidates, promoted levels, or (without a search
@@ -758,8 +774,10 @@ class _Confirmation:
             # factors do not carry over to the full model's material parameters (measured on
             # the DEM: every full run with the mapped factors scored below the baseline), while
             # the effect parameters (depths, speeds, frequencies) have the same meaning in both
-            requests.append((h["name"], {**_confirmation_overrides(h, rep.catalogue),
-                                         **self.cfc_key}, None))
+            level = self.level_for_candidate(h, tier)
+            ov = (dict(level["overrides"]) if level is not None
+                  else _confirmation_overrides(h, rep.catalogue))
+            requests.append((h["name"], {**ov, **self.cfc_key}, None))
         if tier is not None:
             requests += tier.promoted
         else:
@@ -916,6 +934,30 @@ class _Confirmation:
                 "own_score": float(own["score"]),
                 **({"value": float(r["search_value"])} if "search_value" in r else {})}
 
+    def level_for_candidate(self, h: dict[str, Any], tier: _SearchTier | None) -> Row | None:
+        """The search-tier run a screened candidate's full run takes its value from, else None.
+
+        On a two-tier confirmation, a candidate of a searched effect that the screening left
+        switched off (a mapped parameter at its ``off`` value: the screening model could not
+        place the effect) runs at the level that stands for the effect on the search tier
+        (``standing``: located, not beyond the span) instead of the catalogue's nominal value,
+        and is reported with that value (``record``). Measured at the default resolution
+        (``validation/diagnose_cost.py --effect boundary_proximity --value 0.8``): the floor
+        candidate, left at the modelled 2 m, ran at the nominal 1.2 m and was named there
+        (+50 %) while the search tier stood at 0.9 m."""
+        if tier is None or h["name"] not in self.searched or h.get("variant") == FILTER_CLASS_VARIANT:
+            return None
+        hyp = self.rep.catalogue.get(h["name"])
+        vals = h["parameters"]
+        if not any(p.scenario_key is not None and p.name in vals and _at_off(p, vals[p.name])
+                   for p in hyp.parameters):
+            return None
+        run = tier.standing.get(h["name"])
+        if run is None or "search_value" not in run or "overrides" not in run:
+            return None
+        self.at_level[h["name"]] = run
+        return run
+
     def _search_support(self, name: str, tier: _SearchTier,
                         who: str = "the screening's claim") -> str | None:
         """None when the screening's claim ``name`` holds on the search tier -- its best located
@@ -999,6 +1041,12 @@ class _Confirmation:
             _adopt_full_parameters(rep, d.best, searched[d.confirmed],
                                    tier.rows if tier is not None else rows,
                                    tier.floor if tier is not None else full.floor)
+        elif d.confirmed in self.at_level and tier is not None:
+            # a screened candidate run at its search-tier level: that level is its value, with
+            # the search tier's profile and realisation interval as its uncertainty
+            lv = self.at_level[d.confirmed]
+            _adopt_full_parameters(rep, {**d.best, "search_value": lv["search_value"]},
+                                   searched[d.confirmed], tier.rows, tier.floor)
         if self.skipped:
             rep.fit["confirmation_skipped"] = self.skipped
         if self.replicates:
@@ -1729,6 +1777,22 @@ def _derived_values(parameter: str, x: float, interval: Mapping[str, Any] | None
     if interval is not None:
         out["interval"] = [f(interval["low"]), f(interval["high"])]
     return out
+
+
+def _runs_the_baseline(h: dict[str, Any], cat: catalogue.Catalogue) -> bool:
+    """True when a screened candidate's full run (``_confirmation_overrides``: a parameter at
+    its ``off`` value takes the catalogue's nominal) changes nothing in the scenario: it maps
+    at least one parameter, and every one it maps is at its ``off`` value, with no model form
+    (variant) of its own."""
+    if h.get("variant") is not None:
+        return False
+    hyp = cat.get(h["name"])
+    vals = dict(h["parameters"])
+    mapped = [p for p in hyp.parameters if p.scenario_key is not None and p.name in vals]
+    if not mapped or any(p.off is None for p in mapped):
+        return False
+    used = {p.name: (p.nominal if _at_off(p, vals[p.name]) else vals[p.name]) for p in mapped}
+    return all(_at_off(p, used[p.name]) for p in mapped)
 
 
 def _confirmation_overrides(h: dict[str, Any],

@@ -1732,3 +1732,101 @@ def test_a_screened_candidate_must_also_hold_on_the_search_tier(level_105, level
         assert d.unheld == {} and d.best is rows[1]
     # one tier (the replicates among the full runs): the rule does not apply
     assert c.decide(full).confirmed == "boundary_proximity"
+
+
+def test_a_candidate_the_screening_left_off_runs_at_its_search_level():
+    """Two-tier confirmation: a screened candidate of a searched effect whose mapped parameter
+    the screening left at its ``off`` value (the floor at the modelled 2 m bed: the screening
+    model did not place it) runs in the full model at the level that stands for the effect on
+    the search tier, not at the catalogue's nominal value, and is reported with that value,
+    its uncertainty from the search tier's profile. A candidate the screening placed keeps its
+    own value, and one tier has no search level to take. Rows: ``validation/diagnose_cost.py
+    --effect boundary_proximity --value 0.8`` (session 39), whose floor candidate ran at the
+    nominal 1.2 m and was named there while the search tier stood at 0.9 m."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
+    from crashdem.diagnosis.catalogue import drop_catalogue
+    from crashdem.diagnosis.confirm import (REPLICATE, _adopt_full_parameters, _Confirmation,
+                                            _confirmation_overrides, _realisation_floor,
+                                            _SearchTier)
+
+    fs = FS["boundary_proximity"]
+    levels = [_run("boundary_proximity", db, sc, v) for db, sc, v in
+              ((-22.6, 0.72, 0.6), (-47.5, 0.667, 0.7), (-25.9, 0.638, 0.8), (6.8, 0.825, 0.9),
+               (-14.0, 0.683, 1.05), (-26.1, 0.73, 1.25))]
+    for r in levels:
+        r["overrides"] = fs.overrides(r["search_value"])
+    tier_rows = ([_run("baseline", 0.0, 0.611)] + levels
+                 + [_run(REPLICATE, db, sc) for db, sc in ((-13.4, 0.77), (-9.3, 0.76),
+                                                           (8.8, 0.774), (-21.2, 0.635))])
+    floor = _realisation_floor(tier_rows, 0.696)
+    tier = _SearchTier(tier_rows, floor, [], [], {}, {"boundary_proximity": levels[3]})
+    cat = drop_catalogue(RomParams())
+    c = object.__new__(_Confirmation)
+    c.rep = type("R", (), {"catalogue": cat})()
+    c.searched, c.at_level = dict(FS), {}
+
+    def cand(depth):
+        return {"name": "boundary_proximity", "recalibration": {},
+                "parameters": {"floor_depth": depth, "wave_reflection": 1.0}}
+
+    left_off = cand(1.9999998)
+    # before: the nominal value (1.2 m) took the screening's place
+    assert _confirmation_overrides(left_off, cat)["physics.boundary_proximity.floor_depth"] == 1.2
+    assert c.level_for_candidate(left_off, tier) is levels[3]
+    assert c.at_level == {"boundary_proximity": levels[3]}
+    assert c.level_for_candidate(cand(0.85), tier) is None  # placed by the screening
+    assert c.level_for_candidate(left_off, None) is None  # one tier
+    assert c.level_for_candidate({**left_off, "name": "sensor_dynamics"}, tier) is None
+
+    # named: the value reported is the level it ran at, not the screening's 2 m
+    h = {**left_off, "uncertainty": {"floor_depth": 0.07, "wave_reflection": 0.15}}
+    rep = type("R", (), {"hypotheses": [h], "fit": {}})()
+    run = {**_run("boundary_proximity", 23.9, 0.881), "overrides": dict(levels[3]["overrides"])}
+    _adopt_full_parameters(rep, {**run, "search_value": 0.9}, fs, tier_rows, floor)
+    assert h["parameters"]["floor_depth"] == 0.9
+    assert h["screening_parameters"]["floor_depth"] == 1.9999998
+    assert h["scenario_overrides"]["physics.boundary_proximity.floor_depth"] == 0.9
+    assert h["full_model"]["uncertainty"]["floor_depth"] > 0.0
+    assert rep.fit["full_search"]["named"]["floor_depth"] == 0.9
+
+
+def test_a_candidate_whose_full_run_is_the_baseline_is_not_run():
+    """A screened candidate with every mapped parameter at its ``off`` value, the nominal put
+    in its place included (a speed offset of 0 m/s: nominal and off are both 0), would run
+    the baseline simulation again: it is not run (``skipped``, with the reason) and keeps its
+    place among the ``top_k``, unless it is the screening's claim. A candidate the nominal
+    switches on (a floor left at the modelled bed runs at 1.2 m) and one with a model form of
+    its own are run. Measured at the default resolution: such a run gave the reference's own
+    score (0.832) and Delta BIC -3.1."""
+    from crashdem.diagnosis.catalogue import drop_catalogue
+    from crashdem.diagnosis.confirm import _Confirmation, _runs_the_baseline
+
+    cat = drop_catalogue(RomParams())
+    speed0 = {"name": "initial_conditions", "parameters": {"speed_offset": 0.01},
+              "recalibration": {}}
+    floor_off = {"name": "boundary_proximity", "recalibration": {},
+                 "parameters": {"floor_depth": 2.0, "wave_reflection": 1.0}}
+    damping = {"name": "contact_damping", "parameters": {"restitution": 0.3},
+               "recalibration": {}}
+    assert _runs_the_baseline(speed0, cat)
+    assert not _runs_the_baseline({**speed0, "parameters": {"speed_offset": 1.5}}, cat)
+    assert not _runs_the_baseline(floor_off, cat)
+    assert not _runs_the_baseline({**speed0, "variant": "mount"}, cat)
+
+    def chosen(missing, hyps, top_k=2):
+        c = object.__new__(_Confirmation)
+        c.rep = type("R", (), {"catalogue": cat, "missing_physics": missing,
+                               "fit": {"recalibration_unexplained": True},
+                               "hypotheses": [{"name": "recalibration"}, *hyps]})()
+        c.top_k, c.skipped = top_k, {}
+        return [h["name"] for h in c._candidates()], c.skipped
+
+    names, skipped = chosen(None, [damping, speed0, floor_off])
+    assert names == ["contact_damping"]  # the offset keeps its place: no third run
+    assert "the baseline simulation" in skipped["initial_conditions"]
+    assert chosen(None, [speed0, damping, floor_off])[0] == ["contact_damping"]
+    assert chosen(None, [damping, floor_off, speed0])[0] == ["contact_damping",
+                                                              "boundary_proximity"]
+    # the screening's claim runs whatever its value
+    assert chosen("initial_conditions", [speed0, damping]) == (
+        ["initial_conditions", "contact_damping"], {})
