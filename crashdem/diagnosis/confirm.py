@@ -301,8 +301,6 @@ class _Confirmation:
                            "the measured impact speed" if self.speed_measured else None)
         self.top_k = top_k
         self.skipped: dict[str, str] = {}
-        # screened candidates run at their search-tier level (``level_for_candidate``)
-        self.at_level: dict[str, Row] = {}
         self.candidates = self._candidates()
         # the search runs even when the recalibration explains the recording within the total
         # error: the screening model's error floor can hide what the full model resolves
@@ -945,7 +943,8 @@ class _Confirmation:
         (``validation/diagnose_cost.py --effect boundary_proximity --value 0.8``): the floor
         candidate, left at the modelled 2 m, ran at the nominal 1.2 m and was named there
         (+50 %) while the search tier stood at 0.9 m."""
-        if tier is None or h["name"] not in self.searched or h.get("variant") == FILTER_CLASS_VARIANT:
+        if (tier is None or h["name"] not in self.searched
+                or h.get("variant") == FILTER_CLASS_VARIANT):
             return None
         hyp = self.rep.catalogue.get(h["name"])
         vals = h["parameters"]
@@ -953,10 +952,7 @@ class _Confirmation:
                    for p in hyp.parameters):
             return None
         run = tier.standing.get(h["name"])
-        if run is None or "search_value" not in run or "overrides" not in run:
-            return None
-        self.at_level[h["name"]] = run
-        return run
+        return run if run is not None and "search_value" in run else None
 
     def _search_support(self, name: str, tier: _SearchTier,
                         who: str = "the screening's claim") -> str | None:
@@ -1041,12 +1037,14 @@ class _Confirmation:
             _adopt_full_parameters(rep, d.best, searched[d.confirmed],
                                    tier.rows if tier is not None else rows,
                                    tier.floor if tier is not None else full.floor)
-        elif d.confirmed in self.at_level and tier is not None:
+        elif d.confirmed is not None and tier is not None:
             # a screened candidate run at its search-tier level: that level is its value, with
             # the search tier's profile and realisation interval as its uncertainty
-            lv = self.at_level[d.confirmed]
-            _adopt_full_parameters(rep, {**d.best, "search_value": lv["search_value"]},
-                                   searched[d.confirmed], tier.rows, tier.floor)
+            h = next((h for h in tier.candidates if h["name"] == d.confirmed), None)
+            lv = self.level_for_candidate(h, tier) if h is not None else None
+            if lv is not None:
+                _adopt_full_parameters(rep, {**d.best, "search_value": lv["search_value"]},
+                                       searched[d.confirmed], tier.rows, tier.floor)
         if self.skipped:
             rep.fit["confirmation_skipped"] = self.skipped
         if self.replicates:
@@ -1780,34 +1778,39 @@ def _derived_values(parameter: str, x: float, interval: Mapping[str, Any] | None
 
 
 def _runs_the_baseline(h: dict[str, Any], cat: catalogue.Catalogue) -> bool:
-    """True when a screened candidate's full run (``_confirmation_overrides``: a parameter at
-    its ``off`` value takes the catalogue's nominal) changes nothing in the scenario: it maps
-    at least one parameter, and every one it maps is at its ``off`` value, with no model form
+    """True when a screened candidate's full run (``_confirmation_values``: a parameter at its
+    ``off`` value takes the catalogue's nominal) changes nothing in the scenario: it maps at
+    least one parameter, and every one it maps is at its ``off`` value, with no model form
     (variant) of its own."""
     if h.get("variant") is not None:
         return False
     hyp = cat.get(h["name"])
-    vals = dict(h["parameters"])
-    mapped = [p for p in hyp.parameters if p.scenario_key is not None and p.name in vals]
+    used = _confirmation_values(h, hyp)
+    mapped = [p for p in hyp.parameters if p.scenario_key is not None and p.name in used]
     if not mapped or any(p.off is None for p in mapped):
         return False
-    used = {p.name: (p.nominal if _at_off(p, vals[p.name]) else vals[p.name]) for p in mapped}
     return all(_at_off(p, used[p.name]) for p in mapped)
 
 
-def _confirmation_overrides(h: dict[str, Any],
-                            cat: catalogue.Catalogue = catalogue.DROP) -> dict[str, Any]:
-    """Scenario overrides of a candidate's full run: its screened parameters, except where
-    the screening left the effect switched off (a parameter at its ``off`` value, i.e. the
-    screening model could not see the effect): there the catalogue's nominal value is used."""
-    if h.get("variant") == FILTER_CLASS_VARIANT:
-        return {"instrumentation.cfc": float(h["parameters"]["filter_class"])}
-    hyp = cat.get(h["name"])
+def _confirmation_values(h: dict[str, Any], hyp: catalogue.Hypothesis) -> dict[str, float]:
+    """A candidate's parameters for its full run: its screened values, except where the
+    screening left the effect switched off (a parameter at its ``off`` value, i.e. the
+    screening model could not see the effect): there the catalogue's nominal value."""
     vals = dict(h["parameters"])
     for p in hyp.parameters:
         if p.name in vals and _at_off(p, vals[p.name]):
             vals[p.name] = p.nominal
-    return dict(hyp.scenario_overrides({**h["recalibration"], **vals}, h.get("variant")))
+    return vals
+
+
+def _confirmation_overrides(h: dict[str, Any],
+                            cat: catalogue.Catalogue = catalogue.DROP) -> dict[str, Any]:
+    """Scenario overrides of a candidate's full run (``_confirmation_values``)."""
+    if h.get("variant") == FILTER_CLASS_VARIANT:
+        return {"instrumentation.cfc": float(h["parameters"]["filter_class"])}
+    hyp = cat.get(h["name"])
+    return dict(hyp.scenario_overrides({**h["recalibration"], **_confirmation_values(h, hyp)},
+                                       h.get("variant")))
 
 
 def _residual_weight(rep: Report, ch: str) -> float:

@@ -1763,7 +1763,7 @@ def test_a_candidate_the_screening_left_off_runs_at_its_search_level():
     cat = drop_catalogue(RomParams())
     c = object.__new__(_Confirmation)
     c.rep = type("R", (), {"catalogue": cat})()
-    c.searched, c.at_level = dict(FS), {}
+    c.searched = dict(FS)
 
     def cand(depth):
         return {"name": "boundary_proximity", "recalibration": {},
@@ -1773,10 +1773,11 @@ def test_a_candidate_the_screening_left_off_runs_at_its_search_level():
     # before: the nominal value (1.2 m) took the screening's place
     assert _confirmation_overrides(left_off, cat)["physics.boundary_proximity.floor_depth"] == 1.2
     assert c.level_for_candidate(left_off, tier) is levels[3]
-    assert c.at_level == {"boundary_proximity": levels[3]}
     assert c.level_for_candidate(cand(0.85), tier) is None  # placed by the screening
     assert c.level_for_candidate(left_off, None) is None  # one tier
     assert c.level_for_candidate({**left_off, "name": "sensor_dynamics"}, tier) is None
+    # ``record`` asks again for the named candidate: the same level
+    assert c.level_for_candidate(left_off, tier) is levels[3]
 
     # named: the value reported is the level it ran at, not the screening's 2 m
     h = {**left_off, "uncertainty": {"floor_depth": 0.07, "wave_reflection": 0.15}}
