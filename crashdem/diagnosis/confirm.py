@@ -1688,7 +1688,8 @@ def _profile_scatter(levels: list[dict[str, Any]], fs: catalogue.FullSearch) -> 
 def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.FullSearch,
                            rows: list[dict[str, Any]], floor: dict[str, float]) -> None:
     """Record the full model's value of a named searched effect in its hypothesis entry
-    (``full_model``) and, where the screening parameter means the same, in ``parameters``
+    (``full_model``) and in ``parameters`` (with its uncertainty and unit): in place of the
+    screening's where the screening parameter means the same, beside them where it does not
     (the screening's kept in ``screening_parameters``).
 
     Uncertainty: the larger of two. The noise's: from the curvature of Delta BIC over the
@@ -1731,11 +1732,16 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
                        "runs": len(lv), **({"form": fs.form} if fs.form is not None else {})}
     # the scenario fix is the full model's own (the screening's values were mapped across)
     h["scenario_overrides"] = dict(best["overrides"])
-    if fs.parameter in h.get("parameters", {}):
-        h["screening_parameters"] = dict(h["parameters"])
-        h["parameters"] = {**h["parameters"], fs.parameter: x}
-        if isinstance(h.get("uncertainty"), dict):
-            h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
+    # the full model's value is the one the recording was fitted with: it replaces the
+    # screening's where the two mean the same, and joins them where the full model's scenario
+    # value is another quantity (the rolling coefficient of a free rotation, where the
+    # screening model fits a friction ratio and a mobilisation depth)
+    h["screening_parameters"] = dict(h.get("parameters", {}))
+    h["parameters"] = {**h.get("parameters", {}), fs.parameter: x}
+    if isinstance(h.get("uncertainty"), dict):
+        h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
+    if isinstance(h.get("units"), dict):
+        h["units"] = {**h["units"], fs.parameter: fs.unit}
     derived = _derived_values(fs.parameter, x, interval)
     if derived:
         h["full_model"]["derived"] = derived

@@ -1171,6 +1171,39 @@ def test_realisation_interval_of_a_named_value():
     assert _profile_scatter(jag[:3], deep) == 0.0  # fewer than four levels
 
 
+def test_a_named_value_of_another_quantity_joins_the_screening_parameters():
+    """A named searched effect whose full-model value is not a screening parameter (free
+    rotation: the screening model fits a friction ratio and a mobilisation depth, the full model
+    a rolling coefficient) reports that value in ``parameters`` with its uncertainty and unit,
+    beside the screening's (kept in ``screening_parameters`` too). Measured at the default
+    resolution (``validation/diagnose_cost.py --effect particle_rotation --value 0.1``): the
+    report named free rotation with ``parameters`` friction_ratio 0.253 and mobilisation_depth
+    0.126 m, while the rolling coefficient the recording was fitted with (0.0) stood only in
+    ``full_model``."""
+    from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH
+    from crashdem.diagnosis.confirm import _adopt_full_parameters
+
+    fs = DROP_FULL_SEARCH["particle_rotation"]
+    rows = [{"hypothesis": "particle_rotation", "search_value": v, "delta_bic_vs_reference": d,
+             "overrides": fs.overrides(v), "score": sc}
+            for v, d, sc in ((0.0, 30.0, 0.80), (0.05, 24.0, 0.79), (0.2, 5.0, 0.74))]
+    screened = {"friction_ratio": 0.252839520561533, "mobilisation_depth": 0.12588039688691963}
+    rep = type("R", (), {})()
+    rep.hypotheses = [{"name": "particle_rotation", "parameters": dict(screened),
+                       "uncertainty": {"friction_ratio": 0.089, "mobilisation_depth": 0.071},
+                       "units": {"friction_ratio": "1", "mobilisation_depth": "m"}}]
+    rep.fit = {}
+    _adopt_full_parameters(rep, rows[0], fs, rows, {"delta_bic": 0.0, "score": 0.62,
+                                                    "scatter": 5.1})
+    h = rep.hypotheses[0]
+    assert h["parameters"] == {**screened, "rolling_coefficient": 0.0}
+    assert h["screening_parameters"] == screened
+    assert h["units"]["rolling_coefficient"] == "1"
+    assert h["uncertainty"]["rolling_coefficient"] == \
+        h["full_model"]["uncertainty"]["rolling_coefficient"] > 0.0
+    assert h["scenario_overrides"]["physics.particle_rotation.rolling_coefficient"] == 0.0
+
+
 def test_a_named_restitution_reports_its_rebound_restitution():
     """A named contact damping carries the rebound ratio of a head-on contact at its nominal
     restitution and at its interval's ends (``confirm.DERIVED``; oracle: the closed form of
