@@ -3,6 +3,8 @@
 
     python validation/diagnose_cost.py                        # contact damping, e = 0.15
     python validation/diagnose_cost.py --effect initial_conditions --value -3.0
+    python validation/diagnose_cost.py --effect particle_rotation --value 0.1   # rolling coeff.
+    python validation/diagnose_cost.py --effect sensor_dynamics --value 60      # mount [Hz]
     python validation/diagnose_cost.py --warm    # and again, with the beds of the first run
     python validation/diagnose_cost.py --effect none --recalibrate soil.material.young=4e7
 
@@ -49,7 +51,13 @@ DEFAULT_RESOLUTION = {"soil.radius": 0.075, "soil.radius_spread": 0.2, "containe
 EFFECT_KEYS = {"contact_damping": "physics.contact_damping.restitution",
                "initial_conditions": "physics.initial_conditions.velocity_offset",
                "cohesion": "physics.cohesion.normal_strength",
-               "boundary_proximity": "physics.boundary_proximity.floor_depth"}
+               "boundary_proximity": "physics.boundary_proximity.floor_depth",
+               "particle_rotation": "physics.particle_rotation.rolling_coefficient",
+               "sensor_dynamics": "physics.sensor_dynamics.natural_frequency"}
+#: the effect's other truth values (the sensor: a resonant mount, damping ratio 0.1, the
+#: DEM-truth generator's span 0.05-0.15)
+EFFECT_EXTRA = {"sensor_dynamics": {"physics.sensor_dynamics.model": "mount",
+                                    "physics.sensor_dynamics.damping_ratio": 0.1}}
 
 
 def truth_recording(effect: str | None, value: float, out: Path, threads: int,
@@ -66,7 +74,8 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
           "instrumentation.sample_rate": 50000.0, "scenario.threads": threads,
           **check_recalibration(recalibration)}
     if effect is not None:
-        ov.update({f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value})
+        ov.update({f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value,
+                   **EFFECT_EXTRA.get(effect, {})})
     if effect == "cohesion":
         ov["physics.cohesion.shear_strength"] = value
     if effect == "boundary_proximity" and value <= 1.0:
