@@ -46,6 +46,31 @@ def test_truth_with_an_effect_without_one_and_recalibrated(monkeypatch, tmp_path
     assert stiff == {**null, "soil.material.young": 4.0e7}
 
 
+def test_a_free_rotation_and_a_mount_switch_only_their_own_physics(monkeypatch, tmp_path):
+    """The free-rotation truth sets the rolling coefficient, the sensor truth a resonant mount
+    (not the scenario's default seismic low-pass) at the frequency given, damping ratio 0.1;
+    everything else is the null truth's."""
+    null = _truth(monkeypatch, tmp_path, None, 0.0)
+    rot = _truth(monkeypatch, tmp_path, "particle_rotation", 0.1)
+    assert {k: v for k, v in rot.items() if not k.startswith("physics.particle_rotation")} \
+        == null
+    assert rot["physics.particle_rotation.enabled"] is True
+    assert rot["physics.particle_rotation.rolling_coefficient"] == 0.1
+    mount = _truth(monkeypatch, tmp_path, "sensor_dynamics", 60.0)
+    assert {k: v for k, v in mount.items() if not k.startswith("physics.sensor_dynamics")} \
+        == null
+    assert (mount["physics.sensor_dynamics.enabled"], mount["physics.sensor_dynamics.model"],
+            mount["physics.sensor_dynamics.natural_frequency"],
+            mount["physics.sensor_dynamics.damping_ratio"]) == (True, "mount", 60.0, 0.1)
+    from crashdem.diagnosis.generator_dem import scenario_path
+    from crashdem.scenario import load
+
+    # the keys and values are the scenario's own (a misspelt key or a value out of range
+    # would be refused here rather than in a 50 s truth run)
+    for ov in (rot, mount):
+        load(scenario_path(), overrides=ov)
+
+
 @pytest.mark.parametrize("argv", [["--effect", "none", "--recalibrate", "young"],
                                   ["--effect", "none", "--recalibrate", "soil.radius=0.1"],
                                   ["--recalibrate", "soil.material.young=1e12"]])
