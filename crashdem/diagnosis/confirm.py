@@ -267,6 +267,9 @@ class _Decision:
     #: screened candidates whose full run was decisive but which do not hold on the search
     #: tier (``_Confirmation._search_support``), with why: not named
     unheld: dict[str, str] = field(default_factory=dict)
+    #: the screening's claim stood by its score alone against a decisive rival that fits the
+    #: recording with a higher likelihood (``decide``): then neither is named
+    outranked: bool = False
 
 
 class _Confirmation:
@@ -864,7 +867,7 @@ class _Confirmation:
             (r for r in best_h.values() if r is not screened and _decisive(r, floor)
              and r["hypothesis"] not in unheld),
             key=lambda r: -r["delta_bic_vs_reference"])
-        ambiguous = None
+        ambiguous, outranked = None, False
         if rivals:
             top = rivals[0]
             if len(rivals) > 1 and (top["delta_bic_vs_reference"]
@@ -876,6 +879,16 @@ class _Confirmation:
                                       "score": r["score"]} for r in rivals[:2]}
             elif screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
                 confirmed, best = top["hypothesis"], top
+            elif claim_stood and (top["delta_bic_vs_reference"]
+                                  > screened["delta_bic_vs_reference"]):
+                # the claim would stand by its score alone: a decisive rival fits the
+                # recording with a higher likelihood, which ranks effects everywhere else
+                outranked = True
+                ambiguous = [screened["hypothesis"], top["hypothesis"]]
+                rep.fit["confirmation_ambiguous"] = {
+                    r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
+                                      "score": r["score"]} for r in (screened, top)}
+                confirmed, best = None, full.rows[0]
         contested = None
         if confirmed is not None and not self.model_free:
             contested = self._likelihood_rival(confirmed, best, tier)
@@ -889,7 +902,7 @@ class _Confirmation:
                                          "value": contested.get("value")}}
                 confirmed, best = None, full.rows[0]
         return _Decision(confirmed, best, screened, claim_stood, ambiguous, best_h, unsupported,
-                         contested, unheld)
+                         contested, unheld, outranked)
 
     def _likelihood_rival(self, name: str, run: Row,
                           tier: _SearchTier | None) -> dict[str, Any] | None:
@@ -1003,6 +1016,8 @@ class _Confirmation:
                 why = self._beyond_verdict(name, *beyond[name], full.floor)
             elif d.contested is not None and name in d.ambiguous:
                 why = _contested_verdict(name, d.ambiguous, d.contested)
+            elif d.outranked and name in d.ambiguous:
+                why = _outranked_verdict(name, d)
             elif r is not None and r is d.screened and d.unsupported:
                 why = d.unsupported
             elif name in d.unheld:
@@ -1367,6 +1382,7 @@ class _Confirmation:
                    f"{d.contested['delta_bic']:.1f} against {d.contested['own_delta_bic']:.1f}) "
                    f"and scores no worse than every replicate ({d.contested['score']:.3f}): not "
                    f"told apart, neither named; " if d.contested is not None else
+                   _outranked_sentence(d) if d.outranked else
                    f"{' and '.join(d.ambiguous)} both beat the reference within Delta BIC "
                    f"{_ambiguity_margin(full.floor):.3g} of each other, neither named; "
                    if d.ambiguous else "")
@@ -1430,6 +1446,35 @@ def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
                 f"{floor['score']:.3f} (reference and replicates)")
     return (f"decisive (Delta BIC {db:.1f}, score {sc:.3f}) but another effect ranks higher or "
             f"the screening's claim stands")
+
+
+def _outranked_pair(d: _Decision) -> tuple[Row, Row]:
+    """The screening's claim and the rival that out-ranks it in likelihood (``outranked``)."""
+    return d.best_by_effect[d.ambiguous[0]], d.best_by_effect[d.ambiguous[1]]
+
+
+def _outranked_sentence(d: _Decision) -> str:
+    """The decision line's part for a claim out-ranked in likelihood (``_Decision.outranked``)."""
+    claim, rival = _outranked_pair(d)
+    return (f"{d.ambiguous[0]} (the screening's claim) scores higher ({claim['score']:.3f} "
+            f"against {rival['score']:.3f}), but {d.ambiguous[1]} fits the recording with a "
+            f"higher likelihood (Delta BIC {rival['delta_bic_vs_reference']:.1f} against "
+            f"{claim['delta_bic_vs_reference']:.1f}), both decisively: not told apart, neither "
+            f"named; ")
+
+
+def _outranked_verdict(name: str, d: _Decision) -> str:
+    """The verdict line of either effect of an out-ranked claim (``_Decision.outranked``)."""
+    claim, rival = _outranked_pair(d)
+    if name == d.ambiguous[0]:
+        return (f"the screening's claim (Delta BIC {claim['delta_bic_vs_reference']:.1f}, score "
+                f"{claim['score']:.3f}), but {d.ambiguous[1]} fits with a higher likelihood "
+                f"({rival['delta_bic_vs_reference']:.1f}, score {rival['score']:.3f}), both "
+                f"decisively: not told apart")
+    return (f"decisive (Delta BIC {rival['delta_bic_vs_reference']:.1f}, score "
+            f"{rival['score']:.3f}) with a higher likelihood than the screening's claim "
+            f"{d.ambiguous[0]} ({claim['delta_bic_vs_reference']:.1f}), which scores higher "
+            f"({claim['score']:.3f}): not told apart")
 
 
 def _contested_verdict(name: str, pair: list[str], c: dict[str, Any]) -> str:

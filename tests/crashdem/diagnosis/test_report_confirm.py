@@ -334,6 +334,61 @@ def test_verdict_of_a_screening_claim_that_another_effect_replaces(layering_case
     assert "cohesion's full run beats it" in why["soil_layering"]
 
 
+def test_a_claim_outranked_in_likelihood_by_a_decisive_rival_is_not_named(layering_case):
+    """The screening claims the layering and its full runs stand (80 % of the concealed layer's
+    change on the baseline); a searched cohesion level fits the recording with a higher
+    likelihood (its runs carry 85 % of it), decisively, but does not score ``CONFIRM_MIN_GAIN``
+    higher. The claim used to be named by its score alone; now the two are not told apart
+    and neither is named. Measured on Yade's floor recording 12 at 18.45 m through the command
+    line: the screening claimed a layer, its full run Delta BIC 27.7 (score 0.809) against the
+    floor's 0.5 m level 30.8 (0.751), and the layer was named, wrongly. Control: a rival of
+    lower likelihood (75 %) leaves the claim named."""
+    from crashdem.diagnosis.confirm import CONFIRM_MIN_GAIN
+    from crashdem.signal import Signal
+
+    inner = _scenario_rom_simulator([], layering_case.recording)
+    v = layering_case.values
+    # every layering run and every cohesion run carries a share of the concealed layer's change
+    truth = {"physics.soil_layering.enabled": True,
+             "physics.soil_layering.depth": v["interface_depth"],
+             "physics.soil_layering.lower_young_factor": v["strength_ratio"]}
+
+    def mixed(share_claim, share_rival):
+        def full(ov):
+            share = (share_claim if ov.get("physics.soil_layering.enabled") else
+                     share_rival if ov.get("physics.cohesion.enabled") else None)
+            base = {k: v for k, v in ov.items()
+                    if not k.startswith(("physics.soil_layering.", "physics.cohesion."))}
+            off = inner(base)
+            if share is None:
+                return off
+            on = inner({**base, **truth})
+            return {ch: Signal(ch, s.t, share * s.data + (1.0 - share) * off[ch].data, s.unit,
+                               s.cfc) for ch, s in on.items()}
+        return full
+
+    kw = dict(top_k=2, hypotheses=["soil_layering", "cohesion", "initial_conditions"])
+    base = simulate(RomParams())
+    rep = screen_then_confirm(base, layering_case.recording, mixed(0.8, 0.85), **kw)
+    by = {h["name"]: h for h in rep.hypotheses}
+    assert by["soil_layering"]["screening_rank"] == 1  # the screening's claim
+    amb = rep.fit["confirmation_ambiguous"]
+    assert set(amb) == {"soil_layering", "cohesion"}, rep.decision
+    # the premise: the rival is decisive, fits better in likelihood, and not by the score margin
+    assert amb["cohesion"]["delta_bic_vs_reference"] > amb["soil_layering"]["delta_bic_vs_reference"]
+    assert amb["cohesion"]["score"] - amb["soil_layering"]["score"] < CONFIRM_MIN_GAIN
+    assert rep.missing_physics is None, rep.decision
+    assert "neither named" in rep.decision and "higher likelihood" in rep.decision
+    why = rep.fit["confirmation_verdicts"]
+    assert why["soil_layering"].startswith("the screening's claim") and \
+        "not told apart" in why["soil_layering"], why
+    assert "not told apart" in why["cohesion"] and "higher likelihood" in why["cohesion"], why
+    # control: a rival of lower likelihood leaves the claim named
+    kept = screen_then_confirm(base, layering_case.recording, mixed(0.8, 0.75), **kw)
+    assert kept.missing_physics == "soil_layering", kept.decision
+    assert "confirmation_ambiguous" not in kept.fit
+
+
 def test_replicates_run_on_the_search_simulator(layering_case):
     """With a search simulator the replicates run there, next to its baseline run, and set the
     floor of the promotion; the concealed layering (far above a replicate, which here is the
