@@ -375,8 +375,9 @@ def test_a_claim_outranked_in_likelihood_by_a_decisive_rival_is_not_named(layeri
     amb = rep.fit["confirmation_ambiguous"]
     assert set(amb) == {"soil_layering", "cohesion"}, rep.decision
     # the premise: the rival is decisive, fits better in likelihood, and not by the score margin
-    assert amb["cohesion"]["delta_bic_vs_reference"] > amb["soil_layering"]["delta_bic_vs_reference"]
-    assert amb["cohesion"]["score"] - amb["soil_layering"]["score"] < CONFIRM_MIN_GAIN
+    rival, claim = amb["cohesion"], amb["soil_layering"]
+    assert rival["delta_bic_vs_reference"] > claim["delta_bic_vs_reference"]
+    assert rival["score"] - claim["score"] < CONFIRM_MIN_GAIN
     assert rep.missing_physics is None, rep.decision
     assert "neither named" in rep.decision and "higher likelihood" in rep.decision
     why = rep.fit["confirmation_verdicts"]
