@@ -874,9 +874,7 @@ class _Confirmation:
                                     - rivals[1]["delta_bic_vs_reference"]
                                     <= _ambiguity_margin(floor)):
                 ambiguous = [r["hypothesis"] for r in rivals[:2]]
-                rep.fit["confirmation_ambiguous"] = {
-                    r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
-                                      "score": r["score"]} for r in rivals[:2]}
+                rep.fit["confirmation_ambiguous"] = _pair_record(rivals[:2])
             elif screened is None or top["score"] - screened["score"] >= CONFIRM_MIN_GAIN:
                 confirmed, best = top["hypothesis"], top
             elif claim_stood and (top["delta_bic_vs_reference"]
@@ -885,9 +883,7 @@ class _Confirmation:
                 # recording with a higher likelihood, which ranks effects everywhere else
                 outranked = True
                 ambiguous = [screened["hypothesis"], top["hypothesis"]]
-                rep.fit["confirmation_ambiguous"] = {
-                    r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
-                                      "score": r["score"]} for r in (screened, top)}
+                rep.fit["confirmation_ambiguous"] = _pair_record((screened, top))
                 confirmed, best = None, full.rows[0]
         contested = None
         if confirmed is not None and not self.model_free:
@@ -1446,6 +1442,13 @@ def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
                 f"{floor['score']:.3f} (reference and replicates)")
     return (f"decisive (Delta BIC {db:.1f}, score {sc:.3f}) but another effect ranks higher or "
             f"the screening's claim stands")
+
+
+def _pair_record(rows: Iterable[Row]) -> dict[str, dict[str, float]]:
+    """``fit.confirmation_ambiguous`` of two runs not told apart: each effect's Delta BIC over
+    the reference and score."""
+    return {r["hypothesis"]: {"delta_bic_vs_reference": r["delta_bic_vs_reference"],
+                              "score": r["score"]} for r in rows}
 
 
 def _outranked_pair(d: _Decision) -> tuple[Row, Row]:
