@@ -34,7 +34,8 @@ from crashdem.diagnosis.catalogue import CATALOGUE, RECALIBRATION, Hypothesis, P
 from crashdem.diagnosis.fit import (ACCEPT_MARGIN, MIN_SCORE_GAIN, PRE_ONSET, WITHIN_NOISE_RATIO,
                                     FitProblem, FitResult, event_window, fit_hypothesis,
                                     fit_variants, metric_name, rank)
-from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align, estimate_noise,
+from crashdem.diagnosis.mismatch import (MismatchWindow, NoiseEstimate, align,
+                                         describe_changes, estimate_noise, feature_changes,
                                          locate_mismatch, onset_time)
 from crashdem.diagnosis.rom import ACCEL, PENETRATION, VELOCITY, RomParams, RomSettings, RomSimulator
 from crashdem.diagnosis.rom_planar import PLANAR_CHANNELS, PlanarParams, PlanarSimulator
@@ -239,22 +240,12 @@ def _noise_in_window(sig: Signal, quiet: tuple[float, float] | None) -> NoiseEst
 
 def _evidence(h: Hypothesis, res: FitResult, before: list[MismatchWindow],
               after: list[MismatchWindow], base_rms: float) -> str:
-    """One sentence saying what the fitted hypothesis changes."""
-    fixed = [w for w in before if not any(
-        a.channel == w.channel and a.t_end_s >= w.t_start_s and a.t_start_s <= w.t_end_s
-        for a in after)]
+    """One sentence saying what the fitted hypothesis changes: the mismatch features of the
+    baseline it removes or shrinks most (``mismatch.describe_changes``), then the residual."""
     own = ", ".join(f"{p.name} = {res.parameters[p.name]:.3g} {p.unit}" for p in h.parameters) \
         if res.variant != FILTER_CLASS_VARIANT else \
         f"the baseline re-filtered at CFC {res.parameters['filter_class']:g}"
-    if fixed:
-        f = max(fixed, key=lambda w: w.max_residual_sigma)
-        what = f.feature.replace("_", " ")
-        tf = f.feature_time_s if f.feature_time_s is not None else 0.5 * (f.t_start_s + f.t_end_s)
-        verb = {"missing_peak": "adds the missing peak", "extra_peak": "removes the extra peak"}.get(
-            f.feature, f"removes the '{what}' mismatch")
-        txt = f"{verb} at {tf * 1e3:.1f} ms on {f.channel}"
-    else:
-        txt = "removes no mismatch window"
+    txt = describe_changes(feature_changes(before, after)) or "halves no mismatch feature"
     return (f"{txt}; residual {base_rms:.2g} -> {res.rms_sigma:.2g} sigma RMS"
             + (f" with {own}" if own else "") + ".")
 

@@ -37,7 +37,8 @@ from crashdem.diagnosis import (FILTER_CLASS_VARIANT, SPEED_OFFSET_SIGMAS, Repor
 from crashdem.diagnosis.catalogue import RECALIBRATION
 from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
-from crashdem.diagnosis.mismatch import align, onset_time
+from crashdem.diagnosis.mismatch import (SIMULATED_SPAN, align, describe_changes, feature_changes,
+                                         onset_time)
 from crashdem.signal import Signal
 from soil.contact_laws import rebound_restitution
 
@@ -656,8 +657,10 @@ class _Confirmation:
 
     def rated_on(self, base: Mapping[str, Signal], data: Mapping[str, np.ndarray]) -> Row:
         """``rated`` and ``rss`` of a prediction ``data`` per channel on the time axes (units,
-        classes) of ``base``: an anchored run or a pooled level."""
-        al = {ch: Signal(ch, base[ch].t, data[ch], base[ch].unit, base[ch].cfc)
+        classes) of ``base``: an anchored run or a pooled level. The span ``base`` was simulated
+        over (``mismatch.SIMULATED_SPAN``) is the prediction's."""
+        al = {ch: Signal(ch, base[ch].t, data[ch], base[ch].unit, base[ch].cfc,
+                         {k: v for k, v in base[ch].meta.items() if k == SIMULATED_SPAN})
               for ch in self.chans}
         return {**self.rated(al), "rss": _full_rss(self.rep, al)}
 
@@ -1129,6 +1132,35 @@ class _Confirmation:
         for name, why in self.withdrawn.items():
             rep.decision += f"; {name} withdrawn: {why}"
         self.rerank(full, tier, d)
+        self.full_evidence(d)
+
+    def full_evidence(self, d: _Decision) -> None:
+        """The named effect's ``evidence`` from its full run, the answer the report gives: the
+        baseline's mismatch features the run removes or shrinks most
+        (``mismatch.describe_changes`` of ``rep.mismatch`` against ``rep.after_mismatch``),
+        the full model's value (a named search value, else the run's numeric scenario
+        overrides) and the score before and after (a model-free check's sentence,
+        when the screening's evidence has one, kept at the end). The screening model's sentence,
+        which speaks of its own refit and values, is kept in ``screening_evidence``."""
+        rep = self.rep
+        h = next((h for h in rep.hypotheses if h["name"] == d.confirmed), None)
+        if d.confirmed is None or h is None or not rep.refitted:
+            return
+        fm = h.get("full_model") or {}
+        units = fm.get("unit") or {}
+        what = ", ".join(f"{k} = {v:.4g} {units.get(k, '')}".rstrip()
+                         for k, v in (fm.get("parameters") or {}).items()) or ", ".join(
+            f"{k} = {v:.4g}" for k, v in d.best.get("overrides", {}).items()
+            if isinstance(v, (int, float)) and not isinstance(v, bool)
+            and not k.startswith("calibration."))
+        changes = describe_changes(feature_changes(rep.mismatch, rep.after_mismatch))
+        txt = (f"in the full simulation{f' with {what}' if what else ''}: "
+               f"{changes or 'halves no mismatch feature of the baseline'}; score "
+               f"{rep.fit['before']['overall']:.3f} -> {float(d.best['score']):.3f}.")
+        old = h.get("evidence") or ""
+        cut = old.find(" The accelerometer disagrees")
+        h["screening_evidence"] = old
+        h["evidence"] = txt + (old[cut:] if cut >= 0 else "")
 
     def numerics_runs(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
                       d: _Decision, scales: Sequence[float]) -> dict[str, Any] | None:

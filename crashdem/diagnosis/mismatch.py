@@ -25,8 +25,9 @@ from scipy import signal as sps
 from crashdem.diagnosis import _dsp
 from crashdem.signal import Signal
 
-__all__ = ["NoiseEstimate", "Feature", "MismatchWindow", "estimate_noise", "onset_time",
-           "align", "find_features", "locate_mismatch", "MAD_TO_SIGMA", "K_SIGMA"]
+__all__ = ["NoiseEstimate", "Feature", "MismatchWindow", "FeatureChange", "estimate_noise",
+           "onset_time", "align", "find_features", "locate_mismatch", "feature_changes",
+           "describe_changes", "MAD_TO_SIGMA", "K_SIGMA", "SIMULATED_SPAN"]
 
 #: Gaussian consistency factor of the median absolute deviation
 MAD_TO_SIGMA = 1.4826
@@ -50,6 +51,13 @@ QUIET_GUARD = 0.002
 NOISE_FLOOR_FRACTION = 1e-4
 #: duration of a pulse: between first and last crossing of this fraction of the recorded peak
 DURATION_FRACTION = 0.1
+#: ``Signal.meta`` key of an aligned simulation: the time span [s] (on the recording's time
+#: base) it was simulated over; ``align`` holds the nearest simulated value outside it, where
+#: ``locate_mismatch`` compares nothing
+SIMULATED_SPAN = "simulated_span_s"
+#: a mismatch feature counts as removed or corrected by a fit when its size shrinks by at least
+#: this fraction (``describe_changes``)
+CHANGE_FRACTION = 0.5
 
 
 @dataclass(frozen=True)
@@ -88,6 +96,7 @@ class MismatchWindow:
     description: str
     feature_time_s: float | None = None  # when the feature occurs in the recording [s]
     other_features: list[dict[str, Any]] = field(default_factory=list)
+    significance: float | None = None  # the main feature's size over its noise uncertainty
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready dict of the window."""
@@ -257,11 +266,23 @@ def onset_time(sig: Signal, sigma: float, _restart: bool = True) -> float:
 
 def align(recording: Signal, simulation: Signal, shift: float = 0.0) -> Signal:
     """The simulation, time-shifted by ``shift`` [s] and resampled on the recording's time base;
-    samples outside the simulated range hold the nearest simulated value."""
+    samples outside the simulated range hold the nearest simulated value. The range simulated,
+    shifted, is kept in ``meta[SIMULATED_SPAN]`` (a simulation aligned before keeps its own)."""
     ts = simulation.t + shift
     data = np.interp(recording.t, ts, simulation.data)
+    lo, hi = _span(simulation)
+    meta = {**simulation.meta, SIMULATED_SPAN: (lo + shift, hi + shift)}
     return Signal(simulation.name, recording.t.copy(), data, simulation.unit, simulation.cfc,
-                  dict(simulation.meta))
+                  meta)
+
+
+def _span(simulation: Signal) -> tuple[float, float]:
+    """The time span [s] a simulation holds simulated samples over (``SIMULATED_SPAN``, else
+    its own time base)."""
+    span = simulation.meta.get(SIMULATED_SPAN)
+    if span is not None:
+        return float(span[0]), float(span[1])
+    return float(simulation.t[0]), float(simulation.t[-1])
 
 
 def _peaks(t: np.ndarray, x: np.ndarray, sigma: float, distance: int) -> list[tuple[float, float, float]]:
@@ -418,8 +439,9 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
     if min_duration is None:
         min_duration = (1.0 / (2.0 * _dsp.noise_bandwidth(fs, rec.cfc)) if rec.cfc else 2.0 / fs)
     res = sim_a.data - rec.data
-    # only where the simulation exists (no extrapolated samples)
-    valid = (rec.t >= simulation.t[0] + shift) & (rec.t <= simulation.t[-1] + shift)
+    # only where the simulation exists (no extrapolated samples, also of one aligned before)
+    lo, hi = _span(simulation)
+    valid = (rec.t >= lo + shift) & (rec.t <= hi + shift)
     mask = (np.abs(res) > k_sigma * sigma) & valid
     # close gaps shorter than the minimum duration, then drop short runs
     gap = max(1, int(round(min_duration * fs)))
@@ -446,7 +468,8 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
         if inside:
             f = inside[0]
             windows.append(MismatchWindow(rec.name, t0, t1, f.feature, f.size, f.unit, peak_res,
-                                          f.description, f.time_s, [asdict(g) for g in inside[1:]]))
+                                          f.description, f.time_s, [asdict(g) for g in inside[1:]],
+                                          significance=f.significance))
         else:
             mean = float(np.mean(seg))
             name = ("force_too_high" if mean > 0 else "force_too_low") if kind == "acceleration" \
@@ -455,5 +478,126 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
                                           f"simulation {'above' if mean > 0 else 'below'} the "
                                           f"recording by {abs(mean):.3g} {rec.unit} on average "
                                           f"between {t0 * 1e3:.1f} and {t1 * 1e3:.1f} ms",
-                                          0.5 * (t0 + t1)))
+                                          0.5 * (t0 + t1), significance=abs(mean) / sigma))
     return windows
+
+
+
+#: what property of a pulse each feature describes: a fit changes a feature's size within its
+#: family (a peak's height or timing, the pulse duration, the rebound, the initial value, the
+#: mean level), or removes a peak one of the two lacks
+_FAMILY = {"peak_too_high": "peak_height", "peak_too_low": "peak_height",
+           "peak_late": "peak_timing", "peak_early": "peak_timing",
+           "missing_peak": "missing_peak", "extra_peak": "extra_peak",
+           "duration_too_long": "duration", "duration_too_short": "duration",
+           "rebound_too_strong": "rebound", "rebound_too_weak": "rebound",
+           "initial_offset": "initial_offset", "oscillation": "oscillation",
+           "force_too_high": "level", "force_too_low": "level",
+           "value_too_high": "level", "value_too_low": "level"}
+#: families ``find_features`` reports at most once per channel (matched whatever their time)
+_ONCE_PER_CHANNEL = ("duration", "rebound", "initial_offset", "oscillation")
+
+
+@dataclass(frozen=True)
+class FeatureChange:
+    """One mismatch feature of a baseline and the same feature against a fitted simulation:
+    its signed ``before`` and ``after`` size (``after`` 0: the feature is gone) on ``channel``
+    at ``time_s`` in the recording; ``significance``: the feature's before (size / noise)."""
+
+    channel: str
+    feature: str
+    time_s: float
+    before: float
+    after: float
+    unit: str
+    significance: float
+
+    @property
+    def reduction(self) -> float:
+        """The fraction of the feature's size the fit removed (1: gone; < 0: grown)."""
+        return 1.0 - abs(self.after) / abs(self.before) if self.before else 0.0
+
+
+def _window_features(windows: list[MismatchWindow]) -> list[tuple[str, dict[str, Any]]]:
+    """``(channel, feature)`` of every feature of ``windows``: the main one of each window and
+    the others it holds (``feature``, ``time_s``, ``size``, ``unit``, ``significance``)."""
+    out: list[tuple[str, dict[str, Any]]] = []
+    for w in windows:
+        t = w.feature_time_s if w.feature_time_s is not None else 0.5 * (w.t_start_s + w.t_end_s)
+        sig = w.significance if w.significance is not None else w.max_residual_sigma
+        out.append((w.channel, {"feature": w.feature, "time_s": t, "size": w.size,
+                                "unit": w.unit, "significance": sig}))
+        out += [(w.channel, dict(f)) for f in w.other_features]
+    return out
+
+
+def feature_changes(before: list[MismatchWindow], after: list[MismatchWindow]
+                    ) -> list[FeatureChange]:
+    """How each feature of the ``before`` mismatch windows (a baseline against the recording)
+    fares against a fitted simulation's windows ``after`` (``locate_mismatch`` of the same
+    recording): matched on the channel, the feature's family (``_FAMILY``) and, for a peak,
+    the time (within ``PEAK_MATCH_TOL`` or 15 % of it, as ``find_features`` matches peaks).
+    A feature with no match is gone (``after`` 0). A peak's height or timing counts as not
+    changed when the fitted simulation lacks that peak altogether (``missing_peak`` there).
+    In the order of ``before``."""
+    later = _window_features(after)
+    out: list[FeatureChange] = []
+    for ch, f in _window_features(before):
+        fam = _FAMILY.get(f["feature"])
+        t = float(f["time_s"])
+        tol = max(PEAK_MATCH_TOL, 0.15 * abs(t))
+
+        def near(g: dict[str, Any], family: str) -> bool:
+            return (_FAMILY.get(g["feature"]) == family
+                    and (family in _ONCE_PER_CHANNEL or abs(float(g["time_s"]) - t) <= tol))
+
+        same = [g for c, g in later if c == ch and near(g, fam)]
+        size = float(f["size"])
+        if same:
+            g = min(same, key=lambda g: abs(float(g["time_s"]) - t))
+            after_size = float(g["size"])
+        elif fam in ("peak_height", "peak_timing") and any(
+                c == ch and near(g, "missing_peak") for c, g in later):
+            after_size = size
+        else:
+            after_size = 0.0
+        out.append(FeatureChange(ch, f["feature"], t, size, after_size, f["unit"],
+                                 float(f["significance"])))
+    return out
+
+
+def _change_phrase(c: FeatureChange) -> str:
+    """What the fit did to one feature, in words with the numbers."""
+    fam, ms, ch = _FAMILY.get(c.feature), c.time_s * 1e3, c.channel
+    if fam == "missing_peak":
+        return f"adds the missing peak of {c.before:.3g} {c.unit} at {ms:.1f} ms on {ch}"
+    if fam == "extra_peak":
+        return f"removes the extra peak at {ms:.1f} ms on {ch}"
+    if fam == "peak_height":
+        return (f"{'raises' if c.before < 0 else 'lowers'} the peak at {ms:.1f} ms on {ch} "
+                f"(error {c.before:+.3g} -> {c.after:+.3g} {c.unit})")
+    if fam == "peak_timing":
+        return (f"{'advances' if c.before > 0 else 'delays'} the peak at {ms:.1f} ms on {ch} "
+                f"({c.before * 1e3:+.1f} -> {c.after * 1e3:+.1f} ms)")
+    if fam == "duration":
+        return (f"{'shortens' if c.before > 0 else 'lengthens'} the pulse on {ch} (error "
+                f"{c.before * 1e3:+.1f} -> {c.after * 1e3:+.1f} ms)")
+    if fam == "rebound":
+        return (f"{'weakens' if c.before > 0 else 'strengthens'} the rebound on {ch} (error "
+                f"{c.before:+.3g} -> {c.after:+.3g} {c.unit})")
+    if fam == "initial_offset":
+        return f"removes the initial offset on {ch} ({c.before:+.3g} -> {c.after:+.3g} {c.unit})"
+    if fam == "oscillation":
+        return f"removes the residual oscillation on {ch}"
+    return (f"closes the mean gap on {ch} around {ms:.1f} ms ({c.before:+.3g} -> "
+            f"{c.after:+.3g} {c.unit})")
+
+
+def describe_changes(changes: list[FeatureChange], n: int = 2) -> str | None:
+    """The ``n`` features a fit changed most (by their before significance times the fraction
+    removed, each removed or shrunk by at least ``CHANGE_FRACTION``), joined in one clause
+    (e.g. "adds the missing peak of 194 m/s^2 at 28.8 ms on accel_z; strengthens the rebound
+    on velocity_z (error -2.05 -> -0.1 m/s)"); None when none qualifies."""
+    good = sorted((c for c in changes if c.reduction >= CHANGE_FRACTION),
+                  key=lambda c: -c.significance * c.reduction)
+    return "; ".join(_change_phrase(c) for c in good[:n]) or None

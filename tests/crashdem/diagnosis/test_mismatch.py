@@ -152,3 +152,66 @@ def test_filter_startup_transient_is_not_the_onset():
     assert noise.sigma == pytest.approx(estimate_noise(clean).sigma, rel=0.2)
     late = _filtered_as_cut(-0.001, None)
     assert onset_time(late, 0.5) < 0.002
+
+
+def test_an_aligned_simulation_is_compared_only_where_it_was_simulated(t):
+    """A simulation starts at contact; the recording has 80 ms of free fall before it. Aligned
+    on the recording's time base (``align`` holds the first simulated value before it), the
+    simulation is compared only over the span it was simulated: no window before contact. The
+    same samples without that span (the aligned data as a plain signal) show the held value as
+    an initial offset of the size free fall makes (g x 80 ms = 0.78 m/s), so the span is what
+    removes it."""
+    from crashdem.diagnosis.mismatch import SIMULATED_SPAN, align
+
+    v0, g = -15.0, 9.81
+    rng = np.random.default_rng(5)
+    clean = np.where(t < 0.0, v0 - g * t, v0 + 150.0 * t)
+    rec = Signal("velocity_z", t, clean + rng.normal(0.0, 0.01, t.size), "m/s", None)
+    ts = t[t >= 0.0]
+    sim = Signal("velocity_z", ts, v0 + 150.0 * ts, "m/s", None)
+    al = align(rec, sim, 0.0)
+    assert al.meta[SIMULATED_SPAN] == (float(ts[0]), float(ts[-1]))
+    assert locate_mismatch(rec, al, shift=0.0) == []
+    plain = Signal("velocity_z", al.t, al.data, "m/s", None)
+    wins = locate_mismatch(rec, plain, shift=0.0)
+    assert wins[0].feature == "initial_offset" and all(w.t_end_s < 0.0 for w in wins)
+    assert abs(abs(wins[0].size) - g * 0.08) < 0.05
+    # aligned again with a shift, the span moves with it
+    assert align(rec, al, 0.01).meta[SIMULATED_SPAN] == pytest.approx(
+        (float(ts[0]) + 0.01, float(ts[-1]) + 0.01))
+
+
+def test_feature_changes_say_what_a_fit_adds_and_corrects(t):
+    """Oracle: recording = pulses at 15 ms (500 m/s^2) and 38 ms (300); the baseline has the
+    first at 350 (150 too low) and lacks the second. A fit with both pulses right adds the
+    missing peak and raises the first, most significant first; a fit that only corrects the
+    height does not claim the peak; a fit that leaves the first pulse out altogether corrects
+    nothing of its height (the peak is missing there, not better); the baseline itself
+    changes nothing."""
+    from crashdem.diagnosis.mismatch import describe_changes, feature_changes
+
+    first, second = _pulse(t, 0.015, 500.0, 0.004), _pulse(t, 0.038, 300.0, 0.004)
+    rec = _signal(t, _recorded(t, first + second, 3))
+
+    def windows(x):
+        return locate_mismatch(rec, _signal(t, _dsp.cfc(x, FS, CFC)), shift=0.0)
+
+    before = windows(0.7 * first)
+    kinds = {f.feature for f in feature_changes(before, before)}
+    assert {"missing_peak", "peak_too_low"} <= kinds
+    assert describe_changes(feature_changes(before, before)) is None
+
+    both = feature_changes(before, windows(first + second))
+    assert all(c.after == 0.0 for c in both if c.feature in ("missing_peak", "peak_too_low"))
+    txt = describe_changes(both)
+    assert txt.startswith("adds the missing peak") and "at 38.0 ms on accel_z" in txt
+    assert "raises the peak at 15.0 ms on accel_z (error -1" in txt and "-> +0 m/s^2" in txt
+
+    height_only = describe_changes(feature_changes(before, windows(first)))
+    assert height_only.startswith("raises the peak at 15.0 ms") and "adds" not in height_only
+
+    changes = feature_changes(before, windows(second))
+    low = next(c for c in changes if c.feature == "peak_too_low")
+    assert low.after == low.before and low.reduction == 0.0
+    assert describe_changes(changes).startswith("adds the missing peak")
+    assert "15.0 ms" not in describe_changes(changes)

@@ -150,6 +150,22 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     assert "## Full-simulation confirmation" in text and "Full-model search" in text
     for name in DROP.full_search:
         assert f"| {name} |" in text
+    # the named effect's evidence is its full run's, the screening's kept beside it: the
+    # layering adds the recording's second peak the baseline lacks
+    h = rep.hypotheses[0]
+    assert h["name"] == "soil_layering"
+    if "full_model" in h:  # a search level named: its value
+        what = f"interface_depth = {h['full_model']['parameters']['interface_depth']:.4g} m"
+    else:  # the screening's claim run: its scenario values
+        depth = h["scenario_overrides"]["physics.soil_layering.depth"]
+        what = f"physics.soil_layering.depth = {depth:.4g}"
+    assert h["evidence"].startswith(f"in the full simulation with {what}")
+    assert ": adds the missing peak of " in h["evidence"]
+    assert h["evidence"].endswith(f"score {rep.fit['before']['overall']:.3f} -> "
+                                  f"{rep.fit['after_full']['overall']:.3f}.")
+    assert h["screening_evidence"].startswith("adds the missing peak")
+    assert "residual" in h["screening_evidence"]
+    assert all("screening_evidence" not in x for x in rep.hypotheses[1:])
 
 
 def test_numerics_check_widens_a_named_value_by_its_grain_size_shift(tmp_path):
