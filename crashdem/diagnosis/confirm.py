@@ -1134,6 +1134,19 @@ class _Confirmation:
         self.rerank(full, tier, d)
         self.full_evidence(d)
 
+    def run_changes(self, r: Row) -> dict[str, str]:
+        """``{"changes": ...}``: what a run changes of the baseline's mismatch features
+        against the recording (``mismatch.describe_changes``; on the recording's time base,
+        an anchored or pooled run as the baseline plus its change), or {} when it changes none
+        by half or has no signals."""
+        rep = self.rep
+        if "aligned" not in r or not getattr(rep, "mismatch", None):
+            return {}
+        chans = [ch for ch in self.chans if ch in r["aligned"]]
+        after = _remaining_mismatch(rep.recording, r["aligned"], rep.noise, chans)
+        txt = describe_changes(feature_changes(rep.mismatch, after))
+        return {"changes": txt} if txt else {}
+
     def full_evidence(self, d: _Decision) -> None:
         """The named effect's ``evidence`` from its full run, the answer the report gives: the
         baseline's mismatch features the run removes or shrinks most
@@ -1357,7 +1370,8 @@ class _Confirmation:
                                   "delta_bic_vs_floor": float(r["delta_bic_vs_reference"]
                                                               - floor["delta_bic"]),
                                   "score": float(r["score"]),
-                                  **({"value": r["search_value"]} if "search_value" in r else {})}
+                                  **({"value": r["search_value"]} if "search_value" in r else {}),
+                                  **self.run_changes(r)}
         answer = d.confirmed or RECALIBRATION.name
         hyps = list(rep.hypotheses)
         for i, h in enumerate(hyps, 1):

@@ -443,26 +443,39 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
     lo, hi = _span(simulation)
     valid = (rec.t >= lo + shift) & (rec.t <= hi + shift)
     mask = (np.abs(res) > k_sigma * sigma) & valid
-    # close gaps shorter than the minimum duration, then drop short runs
+    # close gaps shorter than the minimum duration between exceedances of the same sign (the
+    # simulation on the same side of the recording), then drop short runs: a window is one
+    # lobe of the residual, so that a long event is located part by part
     gap = max(1, int(round(min_duration * fs)))
     idx = np.flatnonzero(mask)
     runs: list[list[int]] = []
     for i in idx:
-        if runs and i - runs[-1][1] <= gap:
+        if runs and i - runs[-1][1] <= gap and (res[i] > 0.0) == (res[runs[-1][1]] > 0.0):
             runs[-1][1] = i
         else:
             runs.append([i, i])
+    runs = [r for r in runs if float(rec.t[r[1]] - rec.t[r[0]]) >= min_duration]
     kind = "velocity" if rec.unit == "m/s" else "acceleration"
     t_init = float(rec.t[valid][0]) if valid.any() else None
     feats = find_features(rec, sim_a, sigma, kind, t_initial=t_init)
+    # each feature to the one window nearest its time, within a pad of a quarter of the
+    # window's length plus the minimum duration (an initial offset, a value at one instant:
+    # the minimum duration only)
+    owner: dict[int, list[Feature]] = {}
+    for f in feats:
+        best, d_best = None, math.inf
+        for k, (i0, i1) in enumerate(runs):
+            t0, t1 = float(rec.t[i0]), float(rec.t[i1])
+            d = max(t0 - f.time_s, f.time_s - t1, 0.0)
+            pad = min_duration + (0.0 if f.feature == "initial_offset" else 0.25 * (t1 - t0))
+            if d <= pad and d < d_best:
+                best, d_best = k, d
+        if best is not None:
+            owner.setdefault(best, []).append(f)
     windows: list[MismatchWindow] = []
-    for i0, i1 in runs:
+    for k, (i0, i1) in enumerate(runs):
         t0, t1 = float(rec.t[i0]), float(rec.t[i1])
-        if t1 - t0 < min_duration:
-            continue
-        pad = 0.25 * (t1 - t0) + min_duration
-        inside = [f for f in feats if t0 - pad <= f.time_s <= t1 + pad]
-        inside.sort(key=lambda f: -f.significance)
+        inside = sorted(owner.get(k, []), key=lambda f: -f.significance)
         seg = res[i0:i1 + 1]
         peak_res = float(np.max(np.abs(seg)) / sigma)
         if inside:

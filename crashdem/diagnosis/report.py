@@ -60,7 +60,8 @@ def _fmt(v: float | None, nd: int = 3) -> str:
 def _not_told_apart(report, d: dict[str, Any]) -> str:
     """The headline of a report whose confirmation found two effects it could not tell apart
     (``fit["confirmation_ambiguous"]``): each with its located value (the full model's search
-    level, when it has one), Delta BIC over the reference and score."""
+    level, when it has one), Delta BIC over the reference, score and what its run changes of
+    the baseline's mismatch features (``full_model_evidence["changes"]``)."""
     ev = {h["name"]: h.get("full_model_evidence") or {} for h in d["hypotheses"]}
     parts = []
     for name, c in d["fit"]["confirmation_ambiguous"].items():
@@ -68,8 +69,9 @@ def _not_told_apart(report, d: dict[str, Any]) -> str:
         value = c.get("value", ev.get(name, {}).get("value"))
         fs = report.catalogue.full_search.get(name)
         where = f"{fs.parameter} = {_fmt(value)} {fs.unit}; " if value is not None else ""
+        what = ev.get(name, {}).get("changes")
         parts.append(f"{name} ({where}Delta BIC {c['delta_bic_vs_reference']:.1f} over the "
-                     f"reference, score {_fmt(c['score'])})")
+                     f"reference, score {_fmt(c['score'])}" + (f"; {what}" if what else "") + ")")
     return (" and ".join(parts) + ": each fits the recording decisively better than the "
             "reference, neither decisively better than the other, so neither is named -- the "
             "recording alone cannot choose between them at this resolution")
@@ -131,7 +133,8 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         if reranked:
             ev = h.get("full_model_evidence")
             row += (f" {h.get('screening_rank', '')} | "
-                    + (f"{ev['delta_bic_vs_floor']:.1f} ({ev['tier']})" if ev else
+                    + (f"{ev['delta_bic_vs_floor']:.1f} ({ev['tier']})"
+                       + (f"; its run {ev['changes']}" if ev.get("changes") else "") if ev else
                        "0 (the baseline physics: its best realisation)"
                        if h["name"] == "recalibration" else "not run")
                     + " |")
@@ -318,9 +321,15 @@ def plot_overlays(report, out_dir: Path) -> list[str]:
         rec = report.recording[ch]
         scale, unit = (1.0 / G0, "g") if rec.unit == "m/s^2" else (1.0, rec.unit)
         fig, ax = plt.subplots(figsize=(8, 4.5))
-        for w in report.mismatch:
-            if w.channel == ch:
-                ax.axvspan(w.t_start_s * 1e3, w.t_end_s * 1e3, color="tab:red", alpha=0.12, lw=0)
+        # each window shaded (adjacent ones told apart by the shade) and labelled with its
+        # feature at its start
+        wins = [w for w in report.mismatch if w.channel == ch]
+        for i, w in enumerate(wins):
+            ax.axvspan(w.t_start_s * 1e3, w.t_end_s * 1e3, color="tab:red",
+                       alpha=0.10 if i % 2 == 0 else 0.22, lw=0)
+            ax.text(w.t_start_s * 1e3, 0.98, f" {w.feature.replace('_', ' ')}",
+                    transform=ax.get_xaxis_transform(), rotation=90, ha="left", va="top",
+                    fontsize=7, color="tab:red")
         ax.plot(rec.t * 1e3, rec.data * scale, color="k", lw=1.2, label="recording")
         if ch in report.baseline:
             b = report.baseline[ch]

@@ -215,3 +215,48 @@ def test_feature_changes_say_what_a_fit_adds_and_corrects(t):
     assert low.after == low.before and low.reduction == 0.0
     assert describe_changes(changes).startswith("adds the missing peak")
     assert "15.0 ms" not in describe_changes(changes)
+
+
+def test_a_long_mismatch_is_located_lobe_by_lobe(t):
+    """Oracle: recording = pulses at 15 ms (500 m/s^2) and 38 ms (300); simulation = the first
+    at 650 and, instead of the second, a 150 m/s^2 tail at 60 ms. The simulation is above the
+    recording at the first peak, below it at the second and above it in the tail, each
+    crossing steeper than a gap of the minimum duration: three windows in time order, each
+    owning its own feature (peak too high at 15 ms, the missing peak at 38 ms, the extra peak
+    at 60 ms), not one window over the whole event. Each feature is owned by one window only.
+    Control: with the first peak too low (the simulation below the recording from the first
+    peak to the second) those two lobes are one window."""
+    first, second = _pulse(t, 0.015, 500.0, 0.004), _pulse(t, 0.038, 300.0, 0.004)
+    tail = _pulse(t, 0.060, 150.0, 0.006)
+    rec = _signal(t, _recorded(t, first + second, 4))
+    wins = locate_mismatch(rec, _signal(t, _dsp.cfc(1.3 * first + tail, FS, CFC)), shift=0.0)
+    assert [w.feature for w in wins] == ["peak_too_high", "missing_peak", "extra_peak"], \
+        [w.description for w in wins]
+    for w, tc in zip(wins, (0.015, 0.038, 0.060)):
+        assert w.t_start_s < tc < w.t_end_s and abs(w.feature_time_s - tc) < TIME_TOL
+    assert all(a.t_end_s < b.t_start_s for a, b in zip(wins, wins[1:]))
+    owned = [(w.feature, round(w.feature_time_s, 4)) for w in wins] + [
+        (f["feature"], round(f["time_s"], 4)) for w in wins for f in w.other_features]
+    assert len(owned) == len(set(owned))
+    low = locate_mismatch(rec, _signal(t, _dsp.cfc(0.7 * first + tail, FS, CFC)), shift=0.0)
+    assert [w.feature for w in low] == ["missing_peak", "extra_peak"]
+    assert low[0].t_start_s < 0.015 and "peak_too_low" in [
+        f["feature"] for f in low[0].other_features]
+
+
+def test_an_initial_offset_labels_no_later_window(t):
+    """Oracle: the simulation (from contact at 0 s) starts 0.08 m/s off the recording and
+    joins it within 1 ms, then runs 0.5 m/s above it from 10 to 40 ms. The offset at contact is
+    a feature of that instant; the later lobe is a velocity above the recording, not an
+    initial offset, though it starts within a quarter of its length of it."""
+    rng = np.random.default_rng(6)
+    clean = np.where(t < 0.0, -15.0, -15.0 + 100.0 * t)
+    rec = Signal("velocity_z", t, _dsp.cfc(clean + rng.normal(0.0, 0.01, t.size), FS, CFC),
+                 "m/s", CFC)
+    ts = t[t >= 0.0]
+    lobe = 0.5 * np.clip(np.minimum(ts - 0.010, 0.040 - ts) / 0.003, 0.0, 1.0)
+    sim = Signal("velocity_z", ts, -15.0 + 100.0 * ts + 0.08 * np.exp(-ts / 0.001) + lobe,
+                 "m/s", CFC)
+    wins = locate_mismatch(rec, sim, shift=0.0)
+    assert len(wins) == 1 and wins[0].t_start_s > 0.008, [w.description for w in wins]
+    assert wins[0].feature == "value_too_high" and wins[0].other_features == []

@@ -277,6 +277,10 @@ def test_two_effects_that_fit_equally_are_not_told_apart(layering_case):
         where = f"{fs.parameter} = {ev[name]['value']:.3g} {fs.unit}; " if "value" in ev[name] else ""
         assert f"{name} ({where}Delta BIC {c['delta_bic_vs_reference']:.1f} over the reference" \
             in head, head
+        # each run is the recording itself: it adds the layering's peak the baseline lacks,
+        # and the headline says so for both
+        assert ev[name]["changes"].startswith("adds the missing peak of ")
+        assert f"; {ev[name]['changes']})" in head
     assert any("value" in e for e in ev.values())
 
 
