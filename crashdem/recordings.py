@@ -18,7 +18,9 @@ Also read, as other codes write them: whitespace-separated columns; the header a
 comment line right above the data when no header line precedes it (``# t  vz  az``: Yade's
 ``plot.saveDataTxt``, ``numpy.savetxt(header=...)``); a unit as the name's suffix
 (``time_ms``, ``accel_g``, ``force_kN``: ``_SUFFIX_UNITS``) when nothing else gives one; files
-compressed with gzip or bzip2 (``.gz`` / ``.bz2``).
+compressed with gzip or bzip2 (``.gz`` / ``.bz2``); other spellings of the units (``m/s²``,
+``m s^-2``, ``m/sec``, ``N.m``, ``°``, ``-``, time in ``sec``: ``UNIT_SPELLINGS``), stored in
+crashdem's.
 
 HDF5 recording layout::
 
@@ -55,7 +57,20 @@ from crashdem.signal import UNIT_TO_SI, Signal
 FORMATS = ("csv", "hdf5", "isomme")
 HDF5_FORMAT_TAG = "crashdem-recording"
 HDF5_VERSION = 1
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "µs": 1e-6, "sec": 1.0, "msec": 1e-3}
+#: other spellings of units crashdem knows (``signal.UNIT_TO_SI``), as other codes and
+#: spreadsheets write them -> crashdem's spelling; a channel read with one is stored with
+#: crashdem's, so that it converts to SI
+UNIT_SPELLINGS = {
+    **dict.fromkeys(("m/s²", "m/s/s", "m/s**2", "m s^-2", "m s-2", "m*s^-2", "m.s^-2", "m.s-2",
+                     "ms^-2", "ms-2", "m/sec^2", "m/sec2", "m/sec²", "m s⁻²", "m·s⁻²",
+                     "m·s^-2"), "m/s^2"),
+    **dict.fromkeys(("m s^-1", "m s-1", "m*s^-1", "m.s^-1", "m.s-1", "ms^-1", "ms-1", "m/sec",
+                     "m s⁻¹", "m·s⁻¹", "m·s^-1"), "m/s"),
+    **dict.fromkeys(("N.m", "N·m", "N m"), "N*m"),
+    **dict.fromkeys(("rad.s^-1", "rad s^-1", "rad s-1", "rad/sec"), "rad/s"),
+    **dict.fromkeys(("°/s", "deg/sec"), "deg/s"),
+    "°": "deg", "-": "1", "sec": "s"}
 _TIME_NAMES = {"time", "t", "zeit", "temps", "tempo"}
 #: a unit written as the last ``_``-separated part of a column name (lower-cased) -> the unit;
 #: time units only for the time column (``vel_ms`` is not read as milliseconds)
@@ -158,7 +173,8 @@ def detect_format(path: str | Path) -> str:
 def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
                    format: str | None = None, cfc: float | None = None,
                    strict_fs: bool = True,
-                   units: Mapping[str, str] | None = None) -> dict[str, Signal]:
+                   units: Mapping[str, str] | None = None,
+                   skipped: dict[str, str] | None = None) -> dict[str, Signal]:
     """Read a recording and validate every channel.
 
     Parameters
@@ -171,6 +187,11 @@ def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
     strict_fs : see ``validate``
     units : CSV only: unit of each named column whose header (and ``# channel: NAME; unit=U``
         comment) gives none, e.g. ``{"accel_z": "g"}``; a unit the file gives is never replaced
+    skipped : when given (a dict, filled in), a channel that fails ``validate`` is left out
+        and its error message stored under its name, instead of failing the whole file: a
+        reader that uses some channels of another code's output (which may hold a temperature
+        in degC or a contact count in ``-`` beside them) decides itself whether what it needs
+        was among them
 
     Returns
     -------
@@ -207,8 +228,14 @@ def read_recording(path: str | Path, channels: Iterable[str] | None = None, *,
                                      f"{sorted(sigs)}")
             out[hit[0].name] = hit[0]
         sigs = out
-    for s in sigs.values():
-        validate(s, cfc, source=path, strict_fs=strict_fs)
+    for name, s in list(sigs.items()):
+        try:
+            validate(s, cfc, source=path, strict_fs=strict_fs)
+        except RecordingError as e:
+            if skipped is None:
+                raise
+            skipped[name] = str(e)
+            del sigs[name]
     if cfc is not None:
         sigs = {k: (s if s.cfc == cfc else cfc_filter(s, cfc=cfc)) for k, s in sigs.items()}
     return sigs
@@ -443,7 +470,7 @@ def _read_csv(path: Path, units: Mapping[str, str] | None = None) -> dict[str, S
         col = data[:, c]
         if col.size and np.all(np.isnan(col)):
             raise RecordingError(f"{path}: channel {name!r}: empty channel (no values)")
-        out[name] = Signal(name, t.copy(), col.copy(), unit, cfc, m)
+        out[name] = Signal(name, t.copy(), col.copy(), UNIT_SPELLINGS.get(unit, unit), cfc, m)
     return out
 
 
@@ -554,7 +581,8 @@ def _read_hdf5(path: Path) -> dict[str, Signal]:
             cfc = float(g.attrs["cfc"]) if "cfc" in g.attrs else None
             if cfc is not None and not np.isfinite(cfc):
                 cfc = None
-            out[name] = Signal(name, t * TIME_UNITS[t_unit], d, unit, cfc, meta)
+            out[name] = Signal(name, t * TIME_UNITS[t_unit], d, UNIT_SPELLINGS.get(unit, unit),
+                               cfc, meta)
         return out
 
 

@@ -311,10 +311,30 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         if not sep or not name.strip() or not unit.strip():
             raise ValueError(f"--unit {spec!r}: must be NAME=UNIT, e.g. accel_z=g")
         units[name.strip()] = unit.strip()
-    raw = read_recording(args.recording, units=units or None)
+    skipped: dict[str, str] = {}
+    raw = read_recording(args.recording, units=units or None, skipped=skipped)
     base_params = rom_from_scenario(scen)
     planar = isinstance(base_params, PlanarParams)
-    cmap = _channel_map(getattr(args, "channel", None), raw, planar)
+    # a channel left out that the diagnosis reads by name (a model channel's own name, or one
+    # given with --channel) is an error: diagnosing without it would answer another question
+    named = set(PLANAR_CHANNELS if planar else (ACCEL, VELOCITY)) | {
+        spec.split(":", 1)[0] for spec in getattr(args, "channel", None) or []}
+    for name in sorted(named & set(skipped)):
+        raise ValueError(skipped[name])
+    try:
+        cmap = _channel_map(getattr(args, "channel", None), raw, planar)
+    except ValueError as e:
+        if not skipped:
+            raise
+        # a channel the diagnosis needed may be among those left out: say why each was
+        raise ValueError(f"{e}; channels of the recording left out as unusable: "
+                         + "; ".join(skipped.values())) from None
+    if skipped:
+        import logging
+
+        logging.getLogger(__name__).warning(
+            "diagnose: channels of the recording not used (unusable): %s", "; ".join(
+                skipped.values()))
     rec: dict[str, Signal] = {}
     conversions: dict[str, str] = {}
     for name, rom_name in cmap.items():
@@ -404,6 +424,8 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         "directories": [str(d) for d in beds_before]}
     if decimated:  # done here, before the baseline's settings, so diagnose() saw none to do
         rep.fit["decimated"] = decimated
+    if skipped:
+        rep.fit["recorded_channels_skipped"] = dict(skipped)
     rep.fit["recorded_channels"] = {rom: {"recorded": name, "converted": conversions.get(rom)}
                                     for name, rom in cmap.items()}
     paths = write_report(rep, args.out)

@@ -97,6 +97,10 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         lines += [f"| {ch} | {c['recorded']} | {c['converted'] or 'none'} |"
                   for ch, c in conv.items()]
         lines.append("")
+    for name, why in (fit.get("recorded_channels_skipped") or {}).items():
+        lines.append(f"Not used, unusable: `{name}` ({why})  ")
+    if fit.get("recorded_channels_skipped"):
+        lines.append("")
     lines += ["## Noise of the recording", "", "| channel | sigma | unit | method |", "|---|---|---|---|"]
     for ch, n in d["noise"].items():
         lines.append(f"| {ch} | {_fmt(n['sigma'])} | {n['unit']} | {n['method']} |")

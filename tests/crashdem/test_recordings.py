@@ -194,6 +194,41 @@ def test_error_unknown_unit(tmp_path):
         read_recording(tmp_path / "b.h5")
 
 
+@pytest.mark.parametrize("spelled, unit", [
+    ("m/s²", "m/s^2"), ("m s^-2", "m/s^2"), ("m/s/s", "m/s^2"), ("m.s-1", "m/s"),
+    ("m/sec", "m/s"), ("N.m", "N*m"), ("°", "deg"), ("-", "1")])
+def test_other_spellings_of_a_unit(tmp_path, spelled, unit):
+    """A column in another spelling of a unit crashdem knows is read and stored in crashdem's
+    spelling, so that it converts to SI as that unit does (degrees to radians); a time column
+    in ``msec`` is read as ms."""
+    from crashdem.signal import UNIT_TO_SI
+
+    (tmp_path / "b.csv").write_text(f"time [msec],x [{spelled}]\n0,1.5\n1,2.5\n2,3.5\n",
+                                    encoding="utf-8")
+    x = read_recording(tmp_path / "b.csv")["x"]
+    assert x.unit == unit
+    np.testing.assert_allclose(x.t, [0.0, 1e-3, 2e-3])
+    np.testing.assert_allclose(x.to_si().data, UNIT_TO_SI[unit][0] * np.array([1.5, 2.5, 3.5]))
+
+
+def test_unusable_channels_are_left_out_when_the_reader_asks(tmp_path):
+    """Another code's output may hold columns no reader here uses (a temperature in degC, a
+    gap in a contact count). With ``skipped`` each unusable channel is left out and its error
+    kept under its name; the usable ones are read as without it. Without ``skipped`` the first
+    unusable channel fails the file, as before."""
+    (tmp_path / "b.csv").write_text(
+        "time [s],acc [g],temp [degC],n [1]\n0,1,20,5\n0.001,2,20,\n0.002,3,20,7\n",
+        encoding="utf-8")
+    skipped: dict[str, str] = {}
+    sigs = read_recording(tmp_path / "b.csv", skipped=skipped)
+    assert list(sigs) == ["acc"] and sigs["acc"].unit == "g"
+    np.testing.assert_array_equal(sigs["acc"].data, [1.0, 2.0, 3.0])
+    assert set(skipped) == {"temp", "n"}
+    assert "unknown unit 'degC'" in skipped["temp"] and "NaN/inf" in skipped["n"]
+    with pytest.raises(RecordingError, match=r"channel 'temp': unknown unit 'degC'"):
+        read_recording(tmp_path / "b.csv")
+
+
 def test_error_empty_channel(tmp_path):
     (tmp_path / "b.csv").write_text("time [s],acc [g],f [N]\n0,,1\n0.001,,2\n0.002,,3\n",
                                     encoding="utf-8")

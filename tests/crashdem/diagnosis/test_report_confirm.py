@@ -584,6 +584,47 @@ def test_cli_units_given_on_the_command_line(tmp_path):
     assert d["missing_physics"] == "initial_conditions", d["decision"]
 
 
+def test_cli_leaves_out_a_channel_it_cannot_read(tmp_path, capsys):
+    """A recording with a column in a unit crashdem does not know (another code's temperature
+    in degC) beside the channels the diagnosis uses is diagnosed as without it; the report
+    says which channel was left out and why. A channel the diagnosis reads by its name that
+    cannot be read (``accel_z`` in a unit it does not know) is an error naming it, not a
+    diagnosis on the velocity alone. A column of another name in an unknown unit is left out
+    like the temperature (nothing tells it from one), and the report says so."""
+    from crashdem.diagnosis.generator import acquire
+
+    rec = acquire(RomParams(speed_offset=-2.0), np.random.default_rng(13))
+    a, v = rec["accel_z"], rec["velocity_z"]
+    rows = "\n".join(f"{float(t)!r},{float(x)!r},{float(y)!r},21.5"
+                      for t, x, y in zip(a.t, a.data, v.data))
+    path = tmp_path / "extra.csv"
+    path.write_text("time [s],accel_z [m/s^2],velocity_z [m/s],temperature [degC]\n" + rows
+                    + "\n", encoding="utf-8")
+    rc, d = _cli_rom_diagnose(tmp_path, path)
+    assert rc == 0
+    assert d["missing_physics"] == "initial_conditions", d["decision"]
+    assert "unknown unit 'degC'" in d["fit"]["recorded_channels_skipped"]["temperature"]
+    assert "Not used, unusable: `temperature`" in (tmp_path / "out" / "report.md").read_text()
+    bad = tmp_path / "bad.csv"
+    bad.write_text(path.read_text().replace("accel_z [m/s^2]", "accel_z [furlong/s^2]"),
+                   encoding="utf-8")
+    from crashdem import cli
+
+    capsys.readouterr()
+    assert cli.main(["diagnose", "--scenario", str(tmp_path / "s.toml"), "--recording",
+                     str(bad), "--out", str(tmp_path / "out2"), "--baseline", "rom"]) != 0
+    err = capsys.readouterr().err
+    assert "channel 'accel_z': unknown unit 'furlong/s^2'" in err, err
+    # a column of another name in an unknown unit cannot be told from a temperature: it is
+    # left out, and the report says so beside a diagnosis of what remains (the velocity)
+    other = tmp_path / "other.csv"
+    other.write_text(bad.read_text().replace("accel_z [furlong/s^2]", "acc [furlong/s^2]")
+                     .replace("velocity_z [m/s]", "vel [m/s]"), encoding="utf-8")
+    rc, d = _cli_rom_diagnose(tmp_path, other)
+    assert rc == 0 and set(d["fit"]["recorded_channels"]) == {"velocity_z"}
+    assert set(d["fit"]["recorded_channels_skipped"]) == {"acc", "temperature"}
+
+
 def test_recording_units_do_not_matter(layering_case):
     """Same diagnosis when the recorded acceleration is given in g (converted to SI on entry)."""
     from crashdem.signal import G0, Signal
