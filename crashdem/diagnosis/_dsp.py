@@ -110,6 +110,11 @@ def mount_filter_bilinear(x: np.ndarray, dt: float, fn: float, zeta: float,
     return sps.lfilter(b, a, x, zi=zi * x[0])[0]
 
 
+#: highest mount resonance the bilinear design resolves, as a fraction of the Nyquist
+#: frequency 1 / (2 dt) (``_mount_design``)
+MOUNT_NYQUIST_FRACTION = 0.9
+
+
 @functools.lru_cache(maxsize=256)
 def _mount_design(dt: float, fn: float, zeta: float, form: float
                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -117,7 +122,13 @@ def _mount_design(dt: float, fn: float, zeta: float, form: float
     (dt, fn, zeta, form): a screening fit evaluates its model thousands of times, and the mount
     stays where it is while the fit moves its other parameters (measured on a planar
     diagnosis: ``scipy.signal.bilinear`` took 7.1 s of 27.7 s, 2.2 ms a call). The arrays are
-    read-only; the filter is the one designed each time before, bit for bit."""
+    read-only; the filter is the one designed each time before, bit for bit.
+
+    A resonance at or above ``MOUNT_NYQUIST_FRACTION`` of the Nyquist frequency is designed at
+    that frequency: above it the pre-warp runs into tan(pi / 2) (at the Nyquist frequency the
+    filter is singular: a 1 kHz recording and a 1 kHz mount), and a resonance the sampling
+    cannot resolve acts, within the band it does resolve, like one at its edge."""
+    fn = min(fn, MOUNT_NYQUIST_FRACTION * 0.5 / dt)
     wn = 2.0 * math.pi * fn
     # pre-warp: scale so the discrete resonance sits at fn (Oppenheim & Schafer eq. 7.26)
     wp = 2.0 / dt * math.tan(wn * dt / 2.0)

@@ -152,7 +152,13 @@ def accel_velocity_check(acc: Signal, vel: Signal, *, gravity: float = 9.81,
                    reason=f"gain {c0:.3g} between the channels outside {GAIN_RANGE}: they do not "
                           "measure the same motion with the same convention")
         return out
-    lf = (math.log(FN_RANGE[0]), math.log(FN_RANGE[1]))
+    # a resonance the sampling resolves: below the mount design's limit (``_dsp``)
+    fn_hi = min(FN_RANGE[1], _dsp.MOUNT_NYQUIST_FRACTION * 0.5 / dt)
+    if fn_hi <= FN_RANGE[0]:
+        return {**out, "applicable": False, "detected": False,
+                "reason": f"sampled at {1.0 / dt:.4g} Hz: no mount resonance from "
+                          f"{FN_RANGE[0]:g} Hz up is resolved"}
+    lf = (math.log(FN_RANGE[0]), math.log(fn_hi))
     lz = (math.log(ZETA_RANGE[0]), math.log(ZETA_RANGE[1]))
 
     def unpack(x):

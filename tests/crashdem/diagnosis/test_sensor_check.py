@@ -76,3 +76,31 @@ def test_wide_band_channels_are_not_checked():
     rec = acquire(RomParams(), np.random.default_rng(6), cfc=1000.0)
     r = accel_velocity_check(rec["accel_z"], rec["velocity_z"])
     assert not r["applicable"] and "CFC" in r["reason"]
+
+
+def _every(sig: Signal, k: int) -> Signal:
+    """Every ``k``-th sample of a recorded channel (a slower acquisition of the same record)."""
+    return Signal(sig.name, sig.t[::k], sig.data[::k], sig.unit, sig.cfc, dict(sig.meta))
+
+
+def test_a_slow_acquisition_is_checked_below_its_nyquist_frequency():
+    """A recording sampled at 1.04 kHz (12.5 kHz / 12; J211 asks 600 Hz for CFC 60) holds
+    nothing of a mount above its 520 Hz Nyquist frequency. The check searches resonances the
+    sampling resolves (up to ``MOUNT_NYQUIST_FRACTION`` of the Nyquist frequency): it runs
+    where the 1 kHz end of its span made the filter design singular (``Singular matrix``), it
+    does not flag an ideal sensor, and it still finds a 70 Hz mount."""
+    from crashdem.diagnosis import _dsp
+
+    ideal = acquire(RomParams(), np.random.default_rng(1), trigger_offset=0.0012)
+    r = accel_velocity_check(_every(ideal["accel_z"], 12), _every(ideal["velocity_z"], 12))
+    assert r["applicable"] and not r["detected"]
+    assert r["mount_frequency"] <= _dsp.MOUNT_NYQUIST_FRACTION * 0.5 * 12500.0 / 12 + 1e-9
+    rec = acquire(RomParams(mount_frequency=70.0, mount_damping=0.15, mount_form=1.0),
+                  np.random.default_rng(3), trigger_offset=0.0012)
+    r = accel_velocity_check(_every(rec["accel_z"], 12), _every(rec["velocity_z"], 12))
+    assert r["detected"] and r["mount_frequency"] == pytest.approx(70.0, rel=0.1)
+    # the design itself: a resonance at or above the limit is the one at the limit, finite
+    x = np.sin(np.linspace(0.0, 20.0, 400))
+    y = _dsp.mount_filter_bilinear(x, 1e-3, 1000.0, 0.2)
+    assert np.all(np.isfinite(y))
+    np.testing.assert_array_equal(y, _dsp.mount_filter_bilinear(x, 1e-3, 450.0, 0.2))
