@@ -51,6 +51,10 @@ QUIET_GUARD = 0.002
 NOISE_FLOOR_FRACTION = 1e-4
 #: duration of a pulse: between first and last crossing of this fraction of the recorded peak
 DURATION_FRACTION = 0.1
+#: a lobe of the residual whose peak |residual| is below this fraction of a neighbouring
+#: lobe's, as near to it as it is long, is merged into it: an overshoot where the residual
+#: crosses zero (``_merge_minor_lobes``)
+LOBE_MIN_RATIO = 0.1
 #: ``Signal.meta`` key of an aligned simulation: the time span [s] (on the recording's time
 #: base) it was simulated over; ``align`` holds the nearest simulated value outside it, where
 #: ``locate_mismatch`` compares nothing
@@ -406,6 +410,34 @@ def find_features(recording: Signal, simulation: Signal, sigma: float,
     return out
 
 
+def _merge_minor_lobes(runs: list[list[int]], res: np.ndarray, gap: int) -> list[list[int]]:
+    """Runs of samples ``[i0, i1]`` (in order) of the residual ``res`` with each minor lobe
+    merged into a neighbour: the residual overshooting the other side for a moment where it
+    crosses zero (noise, a slightly shifted flank) is part of the lobe beside it, not a window
+    of its own. A lobe is minor beside a neighbour when its peak |residual| is below
+    ``LOBE_MIN_RATIO`` of the neighbour's and the two are no further apart than the lobe is
+    long (or ``gap``); it joins the larger such neighbour. A lone lobe stays one."""
+    runs = [list(r) for r in runs]
+
+    def peak(r: list[int]) -> float:
+        return float(np.max(np.abs(res[r[0]:r[1] + 1])))
+
+    def minor(k: int, j: int) -> bool:
+        if not 0 <= j < len(runs):
+            return False
+        a, b = runs[k], runs[j]
+        d = a[0] - b[1] if j < k else b[0] - a[1]
+        return peak(a) < LOBE_MIN_RATIO * peak(b) and d <= max(gap, a[1] - a[0])
+
+    while True:
+        k = next((k for k in range(len(runs)) if minor(k, k - 1) or minor(k, k + 1)), None)
+        if k is None:
+            return runs
+        j = max((j for j in (k - 1, k + 1) if minor(k, j)), key=lambda j: peak(runs[j]))
+        lo, hi = min(j, k), max(j, k)
+        runs[lo:hi + 1] = [[runs[lo][0], runs[hi][1]]]
+
+
 def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate | None = None,
                     k_sigma: float = K_SIGMA, min_duration: float | None = None,
                     shift: float | None = None) -> list[MismatchWindow]:
@@ -454,6 +486,7 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
             runs[-1][1] = i
         else:
             runs.append([i, i])
+    runs = _merge_minor_lobes(runs, res, gap)
     runs = [r for r in runs if float(rec.t[r[1]] - rec.t[r[0]]) >= min_duration]
     kind = "velocity" if rec.unit == "m/s" else "acceleration"
     t_init = float(rec.t[valid][0]) if valid.any() else None

@@ -260,3 +260,32 @@ def test_an_initial_offset_labels_no_later_window(t):
     wins = locate_mismatch(rec, sim, shift=0.0)
     assert len(wins) == 1 and wins[0].t_start_s > 0.008, [w.description for w in wins]
     assert wins[0].feature == "value_too_high" and wins[0].other_features == []
+
+
+def test_an_overshoot_where_the_residual_crosses_zero_is_no_window_of_its_own(t, monkeypatch):
+    """Oracle: recording = pulses at 15 ms (500 m/s^2) and 38 ms (300); simulation = both
+    30 % low plus a bump between them, so the residual overshoots above the recording for a
+    moment between the two deficits. An 18 m/s^2 bump (its lobe above the recording by some
+    12 m/s^2, 20 noise sigma, under a tenth of the deficits) is part of the lobe beside it: two
+    windows (each peak too low), where without the merge (``LOBE_MIN_RATIO`` 0) it is a third,
+    'force too high'. A 40 m/s^2 bump (a quarter of the deficits) is a window of its own."""
+    from crashdem.diagnosis import mismatch
+
+    first, second = _pulse(t, 0.015, 500.0, 0.004), _pulse(t, 0.038, 300.0, 0.004)
+    rec = _signal(t, _recorded(t, first + second, 8))
+
+    def windows(bump_height):
+        sim = 0.7 * (first + second) + _pulse(t, 0.0265, bump_height, 0.003)
+        return locate_mismatch(rec, _signal(t, _dsp.cfc(sim, FS, CFC)), shift=0.0)
+
+    small = windows(18.0)
+    assert [w.feature for w in small] == ["peak_too_low", "peak_too_low"], \
+        [w.description for w in small]
+    monkeypatch.setattr(mismatch, "LOBE_MIN_RATIO", 0.0)
+    assert [w.feature for w in windows(18.0)] == ["peak_too_low", "force_too_high",
+                                                   "peak_too_low"]
+    monkeypatch.undo()
+    big = windows(40.0)
+    assert [w.feature for w in big] == ["peak_too_low", "force_too_high", "peak_too_low"], \
+        [w.description for w in big]
+    assert big[1].t_start_s < 0.0265 < big[1].t_end_s
