@@ -532,14 +532,15 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
 #: what property of a pulse each feature describes: a fit changes a feature's size within its
 #: family (a peak's height or timing, the pulse duration, the rebound, the initial value, the
 #: mean level), or removes a peak one of the two lacks
-_FAMILY = {"peak_too_high": "peak_height", "peak_too_low": "peak_height",
-           "peak_late": "peak_timing", "peak_early": "peak_timing",
-           "missing_peak": "missing_peak", "extra_peak": "extra_peak",
-           "duration_too_long": "duration", "duration_too_short": "duration",
-           "rebound_too_strong": "rebound", "rebound_too_weak": "rebound",
-           "initial_offset": "initial_offset", "oscillation": "oscillation",
-           "force_too_high": "level", "force_too_low": "level",
-           "value_too_high": "level", "value_too_low": "level"}
+_FAMILY = {name: family for family, names in (
+    ("peak_height", ("peak_too_high", "peak_too_low")),
+    ("peak_timing", ("peak_late", "peak_early")),
+    ("missing_peak", ("missing_peak",)), ("extra_peak", ("extra_peak",)),
+    ("duration", ("duration_too_long", "duration_too_short")),
+    ("rebound", ("rebound_too_strong", "rebound_too_weak")),
+    ("initial_offset", ("initial_offset",)), ("oscillation", ("oscillation",)),
+    ("level", ("force_too_high", "force_too_low", "value_too_high", "value_too_low")))
+    for name in names}
 #: families ``find_features`` reports at most once per channel (matched whatever their time)
 _ONCE_PER_CHANNEL = ("duration", "rebound", "initial_offset", "oscillation")
 
@@ -612,6 +613,18 @@ def feature_changes(before: list[MismatchWindow], after: list[MismatchWindow]
     return out
 
 
+#: the phrase of a signed feature's change: the verb when the simulation was above (later,
+#: longer) the recording and when below, what it acts on, and the size's format (scale to the
+#: shown unit, its format, the unit: None for the feature's own)
+_SIGNED_PHRASE = {
+    "peak_height": ("lowers", "raises", "the peak at {ms:.1f} ms", "error ", 1.0, "+.3g", None),
+    "peak_timing": ("advances", "delays", "the peak at {ms:.1f} ms", "", 1e3, "+.1f", "ms"),
+    "duration": ("shortens", "lengthens", "the pulse", "error ", 1e3, "+.1f", "ms"),
+    "rebound": ("weakens", "strengthens", "the rebound", "error ", 1.0, "+.3g", None),
+    "initial_offset": ("removes", "removes", "the initial offset", "", 1.0, "+.3g", None),
+    "level": ("closes", "closes", "the mean gap around {ms:.1f} ms", "", 1.0, "+.3g", None)}
+
+
 def _change_phrase(c: FeatureChange) -> str:
     """What the fit did to one feature, in words with the numbers."""
     fam, ms, ch = _FAMILY.get(c.feature), c.time_s * 1e3, c.channel
@@ -619,24 +632,11 @@ def _change_phrase(c: FeatureChange) -> str:
         return f"adds the missing peak of {c.before:.3g} {c.unit} at {ms:.1f} ms on {ch}"
     if fam == "extra_peak":
         return f"removes the extra peak at {ms:.1f} ms on {ch}"
-    if fam == "peak_height":
-        return (f"{'raises' if c.before < 0 else 'lowers'} the peak at {ms:.1f} ms on {ch} "
-                f"(error {c.before:+.3g} -> {c.after:+.3g} {c.unit})")
-    if fam == "peak_timing":
-        return (f"{'advances' if c.before > 0 else 'delays'} the peak at {ms:.1f} ms on {ch} "
-                f"({c.before * 1e3:+.1f} -> {c.after * 1e3:+.1f} ms)")
-    if fam == "duration":
-        return (f"{'shortens' if c.before > 0 else 'lengthens'} the pulse on {ch} (error "
-                f"{c.before * 1e3:+.1f} -> {c.after * 1e3:+.1f} ms)")
-    if fam == "rebound":
-        return (f"{'weakens' if c.before > 0 else 'strengthens'} the rebound on {ch} (error "
-                f"{c.before:+.3g} -> {c.after:+.3g} {c.unit})")
-    if fam == "initial_offset":
-        return f"removes the initial offset on {ch} ({c.before:+.3g} -> {c.after:+.3g} {c.unit})"
     if fam == "oscillation":
         return f"removes the residual oscillation on {ch}"
-    return (f"closes the mean gap on {ch} around {ms:.1f} ms ({c.before:+.3g} -> "
-            f"{c.after:+.3g} {c.unit})")
+    above, below, what, label, scale, fmt, unit = _SIGNED_PHRASE[fam or "level"]
+    return (f"{above if c.before > 0 else below} {what.format(ms=ms)} on {ch} ({label}"
+            f"{c.before * scale:{fmt}} -> {c.after * scale:{fmt}} {unit or c.unit})")
 
 
 def describe_changes(changes: list[FeatureChange], n: int = 2) -> str | None:
