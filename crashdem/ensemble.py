@@ -216,9 +216,39 @@ def dask_client(settings: ClusterSettings = ClusterSettings()) -> Iterator[Any]:
                                memory_limit=settings.memory_limit)
     try:
         with Client(cluster) as client:
-            yield client
+            try:
+                yield client
+            finally:
+                _quiet_shutdown(client)
     finally:
         cluster.close()
+
+
+#: loggers of a LocalCluster's worker processes that report the scheduler going away while
+#: they close (``Failed to communicate with scheduler during heartbeat``, dask/distributed
+#: #7192): silenced on the workers when this process closes the cluster itself
+SHUTDOWN_LOGGERS = ("distributed.worker", "distributed.core", "distributed.nanny",
+                    "distributed.comm", "distributed.batched")
+
+
+def _silence_shutdown_loggers() -> list[int]:
+    """On a worker: raise ``SHUTDOWN_LOGGERS`` to CRITICAL; returns their levels now."""
+    import logging
+
+    for name in SHUTDOWN_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    return [logging.getLogger(name).level for name in SHUTDOWN_LOGGERS]
+
+
+def _quiet_shutdown(client: Any) -> None:
+    """Before a LocalCluster this process made is closed: its workers stop logging the
+    scheduler's going away (a finished run used to end with heartbeat tracebacks on stderr
+    when the machine was loaded). Anything a worker reported before is unaffected; a worker
+    that is gone already is skipped."""
+    try:
+        client.run(_silence_shutdown_loggers)
+    except Exception:  # noqa: BLE001 - closing anyway: nothing to report
+        pass
 
 
 # --------------------------------------------------------------------------------------------

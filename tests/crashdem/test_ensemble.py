@@ -539,3 +539,22 @@ def test_calibrate_command_wiring(tmp_path, monkeypatch, capsys):
         en.ChannelObjective(obj.reference, "x", metric="l2")
     with pytest.raises(ValueError, match="RunMember.threads=-1"):
         en.RunMember(threads=-1)
+
+
+def test_workers_stop_logging_the_scheduler_going_away_before_their_cluster_closes(client):
+    """``dask_client`` closes a LocalCluster it made after its workers' shutdown loggers are
+    raised to CRITICAL (``_quiet_shutdown``): a finished run no longer ends with heartbeat
+    tracebacks on stderr. Checked on the workers themselves; this process's loggers are left
+    as they were."""
+    import logging
+
+    def levels():
+        return [logging.getLogger(n).level for n in en.SHUTDOWN_LOGGERS]
+
+    here = levels()
+    assert not any(lv == [logging.CRITICAL] * len(en.SHUTDOWN_LOGGERS)
+                   for lv in client.run(levels).values())
+    en._quiet_shutdown(client)
+    assert all(lv == [logging.CRITICAL] * len(en.SHUTDOWN_LOGGERS)
+               for lv in client.run(levels).values())
+    assert levels() == here
