@@ -250,6 +250,13 @@ def _evidence(h: Hypothesis, res: FitResult, before: list[MismatchWindow],
             + (f" with {own}" if own else "") + ".")
 
 
+def _model_free_evidence(check: Mapping[str, Any]) -> str:
+    """The sentence of a model-free sensor check that found the sensor."""
+    return (f"The accelerometer disagrees with the recorded velocity's derivative by "
+            f"{check['rms_sigma_ideal']:.1f} sigma RMS; a {check['form']} sensor explains it "
+            f"to {check['rms_sigma_fitted']:.2f} sigma (model-free check).")
+
+
 def _residual_correlation(res: np.ndarray) -> float:
     """Integral correlation length of a residual in samples, ``1 + 2 sum rho_k`` (sum to the
     first non-positive autocorrelation; Bendat & Piersol, *Random Data*, section 8.2)."""
@@ -751,10 +758,8 @@ def _hypothesis_entry(r: FitResult, h: Hypothesis, recal: FitResult, score_befor
         "n_parameters": r.k,
         "parameters_at_bounds": r.at_bounds,
         "evidence": _evidence(h, r, windows, after_r, base_rms) + (
-            f" The accelerometer disagrees with the recorded velocity's derivative by "
-            f"{check['rms_sigma_ideal']:.1f} sigma RMS; a {check['form']} sensor explains it "
-            f"to {check['rms_sigma_fitted']:.2f} sigma (model-free check)."
-            if check is not None else ""),
+            " " + _model_free_evidence(check) if check is not None else ""),
+        **({"model_free_evidence": _model_free_evidence(check)} if check is not None else {}),
         "time_shift_s": r.shift_s,
         "n_evaluations": r.n_evals,
     }

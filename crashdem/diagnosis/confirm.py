@@ -1170,10 +1170,9 @@ class _Confirmation:
         txt = (f"in the full simulation{f' with {what}' if what else ''}: "
                f"{changes or 'halves no mismatch feature of the baseline'}; score "
                f"{rep.fit['before']['overall']:.3f} -> {float(d.best['score']):.3f}.")
-        old = h.get("evidence") or ""
-        cut = old.find(" The accelerometer disagrees")
-        h["screening_evidence"] = old
-        h["evidence"] = txt + (old[cut:] if cut >= 0 else "")
+        h["screening_evidence"] = h.get("evidence")
+        h["evidence"] = txt + (f" {h['model_free_evidence']}" if h.get("model_free_evidence")
+                               else "")
 
     def numerics_runs(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
                       d: _Decision, scales: Sequence[float]) -> dict[str, Any] | None:

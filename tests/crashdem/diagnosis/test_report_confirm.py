@@ -168,6 +168,26 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     assert all("screening_evidence" not in x for x in rep.hypotheses[1:])
 
 
+def test_a_confirmed_sensor_keeps_its_model_free_evidence():
+    """A resonant mount found by the model-free accelerometer check and confirmed by its full
+    run: the evidence is the full run's, with the check's sentence kept at its end
+    (``model_free_evidence``), and the screening's sentence in ``screening_evidence``."""
+    from crashdem.diagnosis.generator import acquire
+
+    rec = acquire(RomParams(mount_frequency=70.0, mount_damping=0.15, mount_form=1.0),
+                  np.random.default_rng(3), trigger_offset=0.0012)
+    rep = screen_then_confirm(simulate(RomParams()), rec, _scenario_rom_simulator([]), top_k=2,
+                              full_search=False)
+    assert rep.missing_physics == "sensor_dynamics", rep.decision
+    h = rep.hypotheses[0]
+    mf = h["model_free_evidence"]
+    assert mf.startswith("The accelerometer disagrees") and mf.endswith("(model-free check).")
+    assert h["evidence"].startswith("in the full simulation with physics.sensor_dynamics.")
+    assert h["evidence"].endswith(" " + mf)
+    assert h["screening_evidence"].endswith(" " + mf)
+    assert "residual" in h["screening_evidence"] and "residual" not in h["evidence"]
+
+
 def test_numerics_check_widens_a_named_value_by_its_grain_size_shift(tmp_path):
     """The numerics check reruns the named effect's levels with the grain radius x0.9 and x1.1.
     The recording: the search's own layering form (interface 0.33 m) in the stand-in model;
