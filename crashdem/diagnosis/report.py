@@ -77,6 +77,11 @@ def _not_told_apart(report, d: dict[str, Any]) -> str:
             "recording alone cannot choose between them at this resolution")
 
 
+def _unit(unit: str | None) -> str:
+    """A unit as shown after a value: none for a dimensionless one ("1")."""
+    return "" if unit in (None, "", "1") else unit
+
+
 def to_markdown(report, plots: list[str] | None = None) -> str:
     """A readable summary of the report."""
     from crashdem.diagnosis import CONFIRM_MIN_GAIN, REPLICATE
@@ -87,6 +92,14 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
     mp = d["missing_physics"]
     lines += [f"**Missing physics:** {mp if mp else 'none claimed'}  ",
               f"**Best explanation:** {d['best'] or 'baseline (within noise)'}  "]
+    named = next((h for h in d["hypotheses"] if h["name"] == mp), None) if mp else None
+    if named is not None:
+        units = named.get("units", {})
+        if named["parameters"]:
+            lines.append("**Value:** " + "; ".join(
+                f"{k} = {_fmt(v)} ± {_fmt(named['uncertainty'].get(k))} {_unit(units.get(k))}"
+                .rstrip() for k, v in named["parameters"].items()) + "  ")
+        lines.append(f"**Why:** {named['evidence']}  ")
     if not mp and fit.get("confirmation_ambiguous"):
         lines.append(f"**Not told apart:** {_not_told_apart(report, d)}  ")
     lines += [f"**Decision:** {d['decision']}", ""]
@@ -129,7 +142,7 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
         pars = h["parameters"] if h["parameters"] else h["recalibration"]
         unc = h["uncertainty"] if h["parameters"] else h["recalibration_uncertainty"]
         units = h.get("units", {})
-        ptxt = "; ".join(f"{k} = {_fmt(v)} ± {_fmt(unc.get(k))} {units.get(k, '')}".strip()
+        ptxt = "; ".join(f"{k} = {_fmt(v)} ± {_fmt(unc.get(k))} {_unit(units.get(k))}".strip()
                          for k, v in pars.items())
         row = (f"| {i} | {h['name']} | {ptxt} | {_fmt(h['score_before'])} | "
                f"{_fmt(h['score_after'])} | {h['delta_bic_vs_recalibration']:.1f} | "

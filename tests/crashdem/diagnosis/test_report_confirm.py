@@ -166,6 +166,11 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     assert h["screening_evidence"].startswith("adds the missing peak")
     assert "residual" in h["screening_evidence"]
     assert all("screening_evidence" not in x for x in rep.hypotheses[1:])
+    # report.md heads with the named value and the evidence for it
+    head = text.split("**Decision:**")[0]
+    assert f"**Why:** {h['evidence']}  " in head
+    k, v = next(iter(h["parameters"].items()))
+    assert f"**Value:** {k} = " in head and " m;" in head.split("**Value:**")[1].split("\n")[0]
 
 
 def test_a_confirmed_sensor_keeps_its_model_free_evidence():
