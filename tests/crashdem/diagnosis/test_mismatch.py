@@ -289,3 +289,26 @@ def test_an_overshoot_where_the_residual_crosses_zero_is_no_window_of_its_own(t,
     assert [w.feature for w in big] == ["peak_too_low", "force_too_high", "peak_too_low"], \
         [w.description for w in big]
     assert big[1].t_start_s < 0.0265 < big[1].t_end_s
+
+
+@pytest.mark.parametrize("offset, heads", [(0.05, False), (1.0, True)])
+def test_a_small_feature_does_not_head_a_large_window(t, offset, heads):
+    """Oracle: the simulated velocity starts ``offset`` above the recording, runs up to 2 m/s
+    above it at 30 ms and back by 70 ms. A 0.05 m/s initial offset (2.5 % of the window's
+    largest difference) does not describe that window: it is 'value too high', the offset kept
+    beside it. A 1 m/s offset (half of it) heads it."""
+    rng = np.random.default_rng(9)
+    clean = np.where(t < 0.0, -15.0, -15.0 + 50.0 * t)
+    rec = Signal("velocity_z", t, _dsp.cfc(clean + rng.normal(0.0, 0.01, t.size), FS, CFC),
+                 "m/s", CFC)
+    ts = t[t >= 0.0]
+    lobe = np.interp(ts, [0.0, 0.03, 0.06, 0.07], [offset, 2.0, offset, 0.0])
+    sim = Signal("velocity_z", ts, -15.0 + 50.0 * ts + lobe, "m/s", CFC)
+    wins = locate_mismatch(rec, sim, shift=0.0)
+    assert len(wins) == 1, [x.description for x in wins]
+    w = wins[0]
+    assert w.t_start_s < 0.001 and 0.06 < w.t_end_s < 0.08
+    assert (w.feature == "initial_offset") == heads, w.description
+    if not heads:
+        assert w.feature == "value_too_high" and w.size > 0.5
+        assert [f["feature"] for f in w.other_features] == ["initial_offset"]
