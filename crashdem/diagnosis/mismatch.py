@@ -513,7 +513,7 @@ def locate_mismatch(recording: Signal, simulation: Signal, noise: NoiseEstimate 
         peak_res = float(np.max(np.abs(seg)) / sigma)
         # a feature in the channel's unit under LOBE_MIN_RATIO of the window's largest
         # difference does not describe it (a 0.04 m/s initial offset heading a 100 ms lobe
-        # reaching 3 m/s): the window is then described by its mean, the feature kept beside
+        # reaching 2.2 m/s): the window is then described by its mean, the feature kept beside
         f = next((g for g in inside if g.unit != rec.unit
                   or abs(g.size) >= LOBE_MIN_RATIO * peak_res * sigma), None)
         if f is not None:
