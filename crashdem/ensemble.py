@@ -231,13 +231,12 @@ SHUTDOWN_LOGGERS = ("distributed.worker", "distributed.core", "distributed.nanny
                     "distributed.comm", "distributed.batched")
 
 
-def _silence_shutdown_loggers() -> list[int]:
-    """On a worker: raise ``SHUTDOWN_LOGGERS`` to CRITICAL; returns their levels now."""
+def _silence_shutdown_loggers() -> None:
+    """On a worker: raise ``SHUTDOWN_LOGGERS`` to CRITICAL."""
     import logging
 
     for name in SHUTDOWN_LOGGERS:
         logging.getLogger(name).setLevel(logging.CRITICAL)
-    return [logging.getLogger(name).level for name in SHUTDOWN_LOGGERS]
 
 
 def _quiet_shutdown(client: Any) -> None:

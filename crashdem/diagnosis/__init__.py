@@ -733,6 +733,7 @@ def _hypothesis_entry(r: FitResult, h: Hypothesis, recal: FitResult, score_befor
     """One ``hypotheses`` entry of report.json for the fit ``r`` of ``h`` (``check``: the
     model-free sensor check when it found this sensor)."""
     after_r = _remaining_mismatch(rec, r.aligned, noise, channels)
+    mf = _model_free_evidence(check) if check is not None else None
     own = [p.name for p in h.parameters]
     if r.variant == FILTER_CLASS_VARIANT:
         own = ["filter_class"]
@@ -757,9 +758,8 @@ def _hypothesis_entry(r: FitResult, h: Hypothesis, recal: FitResult, score_befor
         "complexity_penalty": r.complexity_penalty,
         "n_parameters": r.k,
         "parameters_at_bounds": r.at_bounds,
-        "evidence": _evidence(h, r, windows, after_r, base_rms) + (
-            " " + _model_free_evidence(check) if check is not None else ""),
-        **({"model_free_evidence": _model_free_evidence(check)} if check is not None else {}),
+        "evidence": _evidence(h, r, windows, after_r, base_rms) + (f" {mf}" if mf else ""),
+        **({"model_free_evidence": mf} if mf else {}),
         "time_shift_s": r.shift_s,
         "n_evaluations": r.n_evals,
     }

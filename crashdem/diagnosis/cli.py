@@ -319,8 +319,10 @@ def _diagnose_command(args: argparse.Namespace) -> int:
     # given with --channel) is an error: diagnosing without it would answer another question
     named = set(PLANAR_CHANNELS if planar else (ACCEL, VELOCITY)) | {
         spec.split(":", 1)[0] for spec in getattr(args, "channel", None) or []}
-    for name in sorted(named & set(skipped)):
-        raise ValueError(skipped[name])
+    needed = sorted(named & set(skipped))
+    if needed:
+        raise ValueError(skipped[needed[0]])
+    why_skipped = "; ".join(skipped.values())
     try:
         cmap = _channel_map(getattr(args, "channel", None), raw, planar)
     except ValueError as e:
@@ -328,13 +330,12 @@ def _diagnose_command(args: argparse.Namespace) -> int:
             raise
         # a channel the diagnosis needed may be among those left out: say why each was
         raise ValueError(f"{e}; channels of the recording left out as unusable: "
-                         + "; ".join(skipped.values())) from None
+                         f"{why_skipped}") from None
     if skipped:
         import logging
 
         logging.getLogger(__name__).warning(
-            "diagnose: channels of the recording not used (unusable): %s", "; ".join(
-                skipped.values()))
+            "diagnose: channels of the recording not used (unusable): %s", why_skipped)
     rec: dict[str, Signal] = {}
     conversions: dict[str, str] = {}
     for name, rom_name in cmap.items():

@@ -303,6 +303,12 @@ def _duration(t: np.ndarray, x: np.ndarray, level: float) -> tuple[float, float]
     return float(t[idx[0]]), float(t[idx[-1]])
 
 
+def _peak_match_tol(t: float) -> float:
+    """How far apart in time [s] two peaks near ``t`` [s] may be and still be one peak:
+    ``PEAK_MATCH_TOL``, or 15 % of the time after contact when longer."""
+    return max(PEAK_MATCH_TOL, 0.15 * max(t, 1e-3))
+
+
 def find_features(recording: Signal, simulation: Signal, sigma: float,
                   kind: str | None = None, t_initial: float | None = None) -> list[Feature]:
     """Characterise the differences between an aligned simulation and the recording.
@@ -331,7 +337,7 @@ def find_features(recording: Signal, simulation: Signal, sigma: float,
             for j, (ts_, _, _) in enumerate(ps):
                 if j not in used and abs(ts_ - tr) < d_best:
                     j_best, d_best = j, abs(ts_ - tr)
-            if j_best >= 0 and d_best <= max(PEAK_MATCH_TOL, 0.15 * max(tr, 1e-3)):
+            if j_best >= 0 and d_best <= _peak_match_tol(tr):
                 used.add(j_best)
                 ts_, hs, _ = ps[j_best]
                 dh = hs - hr
@@ -589,7 +595,7 @@ def feature_changes(before: list[MismatchWindow], after: list[MismatchWindow]
     """How each feature of the ``before`` mismatch windows (a baseline against the recording)
     fares against a fitted simulation's windows ``after`` (``locate_mismatch`` of the same
     recording): matched on the channel, the feature's family (``_FAMILY``) and, for a peak,
-    the time (within ``PEAK_MATCH_TOL`` or 15 % of it, as ``find_features`` matches peaks).
+    the time (``_peak_match_tol``, as ``find_features`` matches peaks).
     A feature with no match is gone (``after`` 0). A peak's height or timing counts as not
     changed when the fitted simulation lacks that peak altogether (``missing_peak`` there).
     In the order of ``before``."""
@@ -598,7 +604,7 @@ def feature_changes(before: list[MismatchWindow], after: list[MismatchWindow]
     for ch, f in _window_features(before):
         fam = _FAMILY.get(f["feature"])
         t = float(f["time_s"])
-        tol = max(PEAK_MATCH_TOL, 0.15 * abs(t))
+        tol = _peak_match_tol(t)
 
         def near(g: dict[str, Any], family: str) -> bool:
             return (_FAMILY.get(g["feature"]) == family
