@@ -1097,6 +1097,9 @@ def diagnose(baseline_signals: Mapping[str, Signal], recording_signals: Mapping[
         "before": base_scores,
         "after": chosen.scores if chosen is not None else base_scores,
         "after_hypothesis": chosen.hypothesis if chosen is not None else None,
+        # the screening refit; a full-model confirmation that names an effect makes it that
+        # effect's full run (``confirm._Confirmation.full_after``)
+        "after_source": "screening refit",
         "residual_rms_sigma_before": base_rms,
         "residual_rms_sigma_after": chosen.rms_sigma if chosen is not None else base_rms,
         "n_samples": problem.n,

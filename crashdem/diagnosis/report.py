@@ -181,6 +181,13 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                      f"{a['timing_error_s'] * 1e3:.1f} | {_fmt(b['rms_error'])} | {_fmt(a['rms_error'])} |")
     lines.append(f"| **overall** | {_fmt(fit['before']['overall'])} | {_fmt(fit['after']['overall'])} "
                  "| | | | | | |")
+    scr = fit.get("after_screening_refit")
+    if scr:
+        each = ", ".join(f"{ch} {_fmt(v['score'])}" for ch, v in scr["per_channel"].items())
+        lines += ["", f"After: the full simulation with {fit['after_hypothesis']} (the refitted "
+                  f"curve of the plots). The screening refit ({scr['hypothesis']} with the "
+                  f"recalibration, on the reduced-order model anchored on the baseline "
+                  f"simulation) scores {_fmt(scr['overall'])} ({each})."]
     conf = fit.get("confirmation")
     if conf:
         lines += ["", "## Full-simulation confirmation", "",
@@ -353,7 +360,9 @@ def plot_overlays(report, out_dir: Path) -> list[str]:
             ax.plot(b.t * 1e3, b.data * scale, color="tab:blue", lw=1.0, ls="--", label="baseline")
         if ch in report.refitted:
             r = report.refitted[ch]
-            lab = f"refitted ({report.best})" if report.best else "refitted"
+            lab = (f"full simulation with {report.best}"
+                   if report.fit.get("after_source") == "full simulation"
+                   else f"refitted ({report.best})" if report.best else "refitted")
             ax.plot(r.t * 1e3, r.data * scale, color="tab:orange", lw=1.0, label=lab)
         ax.set_xlabel("time [ms]")
         ax.set_ylabel(f"{ch} [{unit}]")

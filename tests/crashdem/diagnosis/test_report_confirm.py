@@ -123,6 +123,7 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     report.md, each effect is judged by its best run, and the concealed layering is named (its
     interface 0.15-0.5 m levels bracket the truth)."""
     from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.confirm import _full_residuals, _full_rss
 
     calls: list = []
     full = _scenario_rom_simulator(calls)
@@ -166,6 +167,27 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     assert h["screening_evidence"].startswith("adds the missing peak")
     assert "residual" in h["screening_evidence"]
     assert all("screening_evidence" not in x for x in rep.hypotheses[1:])
+    # the fit "after" is the named effect's full run (the plots' refitted curve), the screening
+    # refit's scores kept beside it
+    full = rep.fit["after_full"]
+    assert rep.fit["after_source"] == "full simulation"
+    assert rep.fit["after"] == {"per_channel": full["per_channel"], "overall": full["overall"]}
+    assert h["score_after"] == full["overall"]
+    scr = rep.fit["after_screening_refit"]
+    assert scr["hypothesis"] == "soil_layering"
+    assert scr["overall"] == h["screening_score_after"] == rep.fits["soil_layering"].scores[
+        "overall"]
+    assert scr["overall"] != full["overall"]
+    rms = math.sqrt(_full_rss(rep, rep.refitted) / sum(
+        r.size for r in _full_residuals(rep, rep.refitted)))
+    assert rep.fit["residual_rms_sigma_after"] == pytest.approx(rms, rel=1e-12)
+    assert (f"After: the full simulation with soil_layering (the refitted curve of the plots). "
+            f"The screening refit (soil_layering with the recalibration") in text
+    # a screening alone keeps its refit as the fit "after"
+    alone = diagnose(simulate(RomParams()), layering_case.recording)
+    assert alone.fit["after_source"] == "screening refit"
+    assert "after_screening_refit" not in alone.fit
+    assert alone.fit["after"] == alone.fits[alone.best].scores
     # report.md heads with the named value and the evidence for it
     head = text.split("**Decision:**")[0]
     assert f"**Why:** {h['evidence']}  " in head
