@@ -240,6 +240,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="rerun a named soil effect's search levels with the grain radius times "
                         "each factor and widen its uncertainty to how far the value moves "
                         "(default 0.9,1.1; off = none, and on an imported bed)")
+    d.add_argument("--grain-check", default=None, metavar="F[,F...]|off",
+                   help="when a soil effect is named, make the whole confirmation again with the "
+                        "grain radius times each factor (its own baseline, replicates and "
+                        "search) and name the effect only if every factor names it too "
+                        "(default off; e.g. 0.9,1.1)")
     d.add_argument("--packing-cache", default=None, metavar="DIR|off",
                    help="deposit the beds of the baseline, search and confirmation runs in this "
                         "cache, shared by later diagnoses (default: $CRASHDEM_CACHE/packings or "

@@ -23,7 +23,7 @@ import functools
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 
@@ -399,15 +399,17 @@ def _diagnose_command(args: argparse.Namespace) -> int:
             packing_cache=pcache, run_cache=rcache)
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
+        grain = _grain_scales(getattr(args, "grain_check", None))
         level_beds = _level_beds(getattr(args, "level_beds", None))
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:
-            reps, numerics, level_beds = [], (), 1
+            reps, numerics, grain, level_beds = [], (), (), 1
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
-                                  numerics=numerics, level_beds=level_beds, **cat_kw)
+                                  numerics=numerics, level_beds=level_beds,
+                                  grain_check=grain, **cat_kw)
         rep.simulations["full_search"] = search_how
         if one_bed is not None:
             rep.simulations["imported_bed"] = one_bed
@@ -475,11 +477,13 @@ def _one_bed(scen, search_sim, args) -> dict[str, Any] | None:
             raise ValueError(f"{opt}={val!r}: the scenario's bed is imported ({field}="
                              f"{bed['packing_file']!r}), one realisation that another packing "
                              f"seed repeats; allowed: {none[1]} (or leave it out)")
-    nc = getattr(args, "numerics_check", None)
-    if nc is not None and _numerics_scales(nc):
-        raise ValueError(f"--numerics-check={nc!r}: the scenario's bed is imported ({field}), "
-                         "whose grain radii a radius factor does not change; allowed: off (or "
-                         "leave it out)")
+    for opt, val, parse in (("--numerics-check", getattr(args, "numerics_check", None),
+                             _numerics_scales),
+                            ("--grain-check", getattr(args, "grain_check", None), _grain_scales)):
+        if val is not None and parse(val):
+            raise ValueError(f"{opt}={val!r}: the scenario's bed is imported ({field}), whose "
+                             "grain radii a radius factor does not change; allowed: off (or "
+                             "leave it out)")
     return {**bed, "replicates": 0, "level_beds": 1, "numerics_check": "off",
             "why": ("the recording's bed is the model's (imported, one realisation): no "
                     "replicate packings or realisation floor, one bed per search level, no "
@@ -504,21 +508,37 @@ def _numerics_scales(text: str | None) -> tuple[float, ...]:
     """``--numerics-check``: the grain-radius factors of the numerics check of a named value
     (default ``confirm.NUMERICS_RADIUS_SCALES``; ``off`` = none)."""
     from crashdem.diagnosis.confirm import NUMERICS_RADIUS_SCALES
+
+    return _radius_factors(text, "--numerics-check", NUMERICS_RADIUS_SCALES)
+
+
+def _grain_scales(text: str | None) -> tuple[float, ...]:
+    """``--grain-check``: the grain-radius factors at which the whole confirmation of a named
+    soil effect is made again (default ``confirm.GRAIN_CHECK_SCALES``; ``off`` = none)."""
+    from crashdem.diagnosis.confirm import GRAIN_CHECK_SCALES
+
+    return _radius_factors(text, "--grain-check", GRAIN_CHECK_SCALES)
+
+
+def _radius_factors(text: str | None, opt: str, default: Sequence[float]
+                    ) -> tuple[float, ...]:
+    """Comma-separated grain-radius factors of option ``opt`` (``off`` = none, None = the
+    default), each in ``distributed.RADIUS_SCALE_RANGE``."""
     from crashdem.diagnosis.distributed import RADIUS_SCALE_RANGE
 
     if text is None:
-        return tuple(NUMERICS_RADIUS_SCALES)
+        return tuple(default)
     if text.strip().lower() in ("off", "none", ""):
         return ()
     lo, hi = RADIUS_SCALE_RANGE
     try:
         out = tuple(float(v) for v in text.split(","))
     except ValueError:
-        raise ValueError(f"--numerics-check={text!r}: must be comma-separated grain-radius "
+        raise ValueError(f"{opt}={text!r}: must be comma-separated grain-radius "
                          f"factors in [{lo:g}, {hi:g}] (e.g. 0.9,1.1) or off") from None
     bad = [f for f in out if not lo <= f <= hi]
     if bad:
-        raise ValueError(f"--numerics-check={text!r}: factor {bad[0]:g} is outside "
+        raise ValueError(f"{opt}={text!r}: factor {bad[0]:g} is outside "
                          f"[{lo:g}, {hi:g}] (a factor on the scenario's grain radius)")
     return out
 

@@ -86,6 +86,12 @@ SPEED_CHECK_SIGMAS = SPEED_OFFSET_SIGMAS
 #: ten per cent, and from another code; the realisation interval samples packings only.
 NUMERICS_RADIUS_SCALES = (0.9, 1.1)
 
+#: the grain check of a named soil effect (``screen_then_confirm(..., grain_check=...)``, CLI
+#: ``--grain-check``): the whole confirmation made again with every run's grain radius times
+#: each of these factors (its own baseline, replicates, search levels and candidates), and the
+#: soil effect named only when every one of them names it too. Off by default (``()``)
+GRAIN_CHECK_SCALES: tuple[float, ...] = ()
+
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
 #: packing seed and the first ``LEVEL_BEDS - 1`` replicate seeds, each taken as its change
@@ -120,6 +126,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         replicates: Sequence[Mapping[str, Any]] = (),
                         numerics: Sequence[float] = NUMERICS_RADIUS_SCALES,
                         level_beds: int | None = None,
+                        grain_check: Sequence[float] = GRAIN_CHECK_SCALES,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -167,6 +174,14 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         the packing scatter between the levels of a deposited effect falls with the number of
         beds while each level still carries one realisation's scatter against the recording,
         as every other run does. 1: one bed per level
+    grain_check : grain-radius factors of the grain check of a named soil effect
+        (``GRAIN_CHECK_SCALES``; ``()`` skips it): when a soil effect is named (not a
+        model-free answer, nor with a filter-class mismatch), the whole confirmation is made
+        again at each factor -- the baseline run, the screening on it, the replicates, the
+        search levels, the candidates and the numerics check, every run with the grain radius
+        times the factor -- and the effect stays named only when each of these names it too;
+        otherwise it is withdrawn and the decision taken again without it (a rival it leaves
+        named meets the same rule). ``fit.grain_check`` records each factor's answer and runs
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -202,25 +217,129 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     full = c.full_tier(full_simulator, tier)
     t_full = time.perf_counter() - t_full
     d = c.decide(full, tier)
-    checks: list[dict[str, Any]] = []
-    if numerics:
-        # a named value the numerics cannot resolve is withdrawn and the decision taken again
-        # without it (each effect at most once)
-        for _ in range(len(c.searched)):
-            check = c.numerics_runs(search_simulator if tier is not None else full_simulator,
-                                    tier, full, d, numerics)
-            if check is None:
-                break
-            checks.append(check)
-            why = c.unresolved(d, check)
-            if why is None:
-                break
-            c.withdrawn = {**c.withdrawn, check["hypothesis"]: why}
+    search_sim = search_simulator if tier is not None else full_simulator
+    d, checks = _numerics_decision(c, d, full, tier, search_sim, numerics)
+    grain = []
+    if grain_check and c.grain_checked(d):
+        for f in grain_check:
+            grain.append(_grain_decision(
+                float(f), baseline_signals, recording_signals, full_simulator, top_k=top_k,
+                full_search=full_search, search_simulator=search_simulator,
+                replicates=replicates, numerics=numerics, level_beds=level_beds,
+                **diagnose_kw))
+        while c.grain_checked(d) and any(g["named"] != d.confirmed for g in grain):
+            c.withdrawn = {**c.withdrawn, d.confirmed: _grain_verdict(d.confirmed, grain)}
             d = c.decide(full, tier)
+            if c.grain_checked(d) and d.confirmed not in {ch["hypothesis"] for ch in checks}:
+                d, more = _numerics_decision(c, d, full, tier, search_sim, numerics)
+                checks += more
     c.record(full, tier, d, t_full)
     for check in checks:
         c.numerics_record(check, d)
+    if grain:
+        rep.fit["grain_check"] = grain
+        rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in grain)
     return rep
+
+
+def _numerics_decision(c: _Confirmation, d: _Decision, full: _FullTier,
+                       tier: _SearchTier | None, sim: Simulator, numerics: Sequence[float]
+                       ) -> tuple[_Decision, list[dict[str, Any]]]:
+    """The decision after the numerics check: a named value the numerics cannot resolve is
+    withdrawn and the decision taken again without it (each effect at most once); the checks
+    made."""
+    checks: list[dict[str, Any]] = []
+    if not numerics:
+        return d, checks
+    for _ in range(len(c.searched)):
+        check = c.numerics_runs(sim, tier, full, d, numerics)
+        if check is None:
+            break
+        checks.append(check)
+        why = c.unresolved(d, check)
+        if why is None:
+            break
+        c.withdrawn = {**c.withdrawn, check["hypothesis"]: why}
+        d = c.decide(full, tier)
+    return d, checks
+
+
+class _GrainScaled:
+    """A simulator whose every run has its grain radius times ``factor``
+    (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has)."""
+
+    def __init__(self, sim: Simulator, factor: float):
+        self.sim, self.factor = sim, float(factor)
+
+    def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
+        return {**overrides,
+                RADIUS_SCALE_KEY: self.factor * float(overrides.get(RADIUS_SCALE_KEY, 1.0))}
+
+    def __call__(self, overrides: Mapping[str, Any]) -> Any:
+        return self.sim(self.scaled(overrides))
+
+    def map(self, batch: list[Mapping[str, Any]]) -> list[Any]:
+        scaled = [self.scaled(ov) for ov in batch]
+        if hasattr(self.sim, "map"):
+            return list(self.sim.map(scaled))  # type: ignore[attr-defined]
+        return [self.sim(ov) for ov in scaled]
+
+
+def _grain_decision(factor: float, baseline_signals: Mapping[str, Signal],
+                    recording_signals: Mapping[str, Signal], full_simulator: Simulator, *,
+                    top_k: int, full_search: bool | Mapping[str, catalogue.FullSearch],
+                    search_simulator: Simulator | None,
+                    replicates: Sequence[Mapping[str, Any]], numerics: Sequence[float],
+                    level_beds: int, **diagnose_kw) -> dict[str, Any]:
+    """One factor of the grain check: the confirmation made again, every run (the baseline
+    first) with the grain radius times ``factor``; what it names and how many runs it made."""
+    t0 = time.perf_counter()
+    full = _GrainScaled(full_simulator, factor)
+    search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
+    counted = _Counted(full)
+    counted_search = _Counted(search) if search is not None else None
+    base = counted({})
+    kw = {k: v for k, v in diagnose_kw.items() if k != "baseline_raw"}
+    rep = diagnose(base, recording_signals, **kw)
+    c = _Confirmation(rep, top_k, full_search, kw.get("hypotheses"), replicates, level_beds, base)
+    tier = (c.search_tier(counted_search) if c.searched and counted_search is not None
+            else None)
+    ft = c.full_tier(counted, tier)
+    d = c.decide(ft, tier)
+    d, _ = _numerics_decision(c, d, ft, tier, counted_search if tier is not None else counted,
+                              numerics)
+    runs = counted.n + (counted_search.n if counted_search is not None else 0)
+    return {"radius_scale": factor, "named": d.confirmed,
+            "ambiguous": list(d.ambiguous) if d.ambiguous else None,
+            "value": d.best.get("search_value") if d.confirmed else None,
+            "score": d.best.get("score") if d.confirmed else None,
+            "runs": runs, "wall_time_s": time.perf_counter() - t0}
+
+
+class _Counted:
+    """A simulator counting the runs it is asked for (``map`` batches included)."""
+
+    def __init__(self, sim: Any):
+        self.sim, self.n = sim, 0
+
+    def __call__(self, overrides: Mapping[str, Any]) -> Any:
+        self.n += 1
+        return self.sim(overrides)
+
+    def map(self, batch: list[Mapping[str, Any]]) -> list[Any]:
+        self.n += len(batch)
+        return self.sim.map(batch)
+
+
+def _grain_verdict(name: str, grain: Sequence[Mapping[str, Any]]) -> str:
+    """Why a soil effect named at the model's grains is withdrawn by the grain check."""
+    each = "; ".join(f"{g['radius_scale']:g}x grains: "
+                     + (g["named"] if g["named"] else
+                        "nothing (" + " / ".join(g["ambiguous"]) + " not told apart)"
+                        if g.get("ambiguous") else "nothing")
+                     for g in grain)
+    return (f"the confirmation made again with the grain radius scaled does not name it at "
+            f"every grain size ({each}): the answer is not resolved by the model's numerics")
 
 
 @dataclass
@@ -1201,6 +1320,13 @@ class _Confirmation:
         if h is not None:
             h["screening_score_after"] = h["score_after"]
             h["score_after"] = full["overall"]
+
+    def grain_checked(self, d: _Decision) -> bool:
+        """Whether the grain check applies to decision ``d``: an effect named on the soil
+        model's evidence -- not a model-free answer (sensor check, measured impact speed),
+        and not with the recording at another filter class (the check's baselines would need
+        their raw channels to be re-filtered)."""
+        return d.confirmed is not None and not self.model_free and not self.cfc_key
 
     def numerics_runs(self, sim: Simulator, tier: _SearchTier | None, full: _FullTier,
                       d: _Decision, scales: Sequence[float]) -> dict[str, Any] | None:

@@ -269,6 +269,65 @@ def test_numerics_check_widens_a_named_value_by_its_grain_size_shift(tmp_path):
     assert "numerics_simulations" not in off.simulations
 
 
+def test_grain_check_names_only_what_every_grain_size_names(tmp_path):
+    """The grain check makes the whole confirmation again with every run's grain radius times
+    a factor (its own baseline run, screening, search and numerics check). The recording: the
+    search's layering form (interface 0.33 m) in the stand-in model, which has no grains, so
+    at 1.3 x the confirmation names the layering too and the name stands, the check's answer
+    and runs recorded. Control: a stand-in in which the layering shows nothing from 1.25 x
+    the grain radius on (its runs there are the baseline's); the confirmation at 1.3 x then
+    names nothing, and the layering named at the model's grains is withdrawn, with why.
+    Without the check (the default) neither is recorded."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.confirm import GRAIN_CHECK_SCALES
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
+
+    fs = {"soil_layering": DROP.full_search["soil_layering"]}
+    truth = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(
+        fs["soil_layering"].overrides(0.33)))
+    recording = acquire(truth, np.random.default_rng(5))
+    calls: list = []
+    rom = _scenario_rom_simulator(calls)
+
+    def fading(overrides):
+        """The layering shows nothing on grains 1.25 x or more the model's."""
+        if float(overrides.get(RADIUS_SCALE_KEY, 1.0)) >= 1.25:
+            overrides = {k: v for k, v in overrides.items()
+                         if not k.startswith("physics.soil_layering.")}
+        return rom(overrides)
+
+    def run(sim, grain_check=(1.3,)):
+        calls.clear()
+        return screen_then_confirm(simulate(RomParams()), recording, sim, top_k=0,
+                                   full_search=fs, grain_check=grain_check)
+
+    kept = run(rom)
+    assert kept.missing_physics == "soil_layering", kept.decision
+    (g,) = kept.fit["grain_check"]
+    assert g["radius_scale"] == 1.3 and g["named"] == "soil_layering"
+    # the check's runs: at 1.3 x, and its numerics check's at 1.3 x 0.9 and 1.3 x 1.1
+    scaled = [c for c in calls if round(c.get(RADIUS_SCALE_KEY, 1.0), 9) not in (0.9, 1.0, 1.1)]
+    assert g["runs"] == kept.simulations["grain_check_simulations"] == len(scaled) > 0
+    assert "withdrawn" not in kept.decision
+
+    gone = run(fading)
+    assert gone.fit["grain_check"][0]["named"] is None
+    assert gone.missing_physics is None, gone.decision
+    assert ("soil_layering withdrawn: the confirmation made again with the grain radius scaled "
+            "does not name it at every grain size (1.3x grains: nothing)") in gone.decision
+    write_report(gone, tmp_path, plots=False)
+    assert "named, then withdrawn: the confirmation made again" in (
+        tmp_path / "report.md").read_text()
+
+    assert GRAIN_CHECK_SCALES == ()
+    off = run(fading, GRAIN_CHECK_SCALES)
+    assert off.missing_physics == "soil_layering"
+    assert "grain_check" not in off.fit and "grain_check_simulations" not in off.simulations
+    assert all(round(c.get(RADIUS_SCALE_KEY, 1.0), 9) in (0.9, 1.0, 1.1) for c in calls)
+
+
 def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
     """With a separate (cheaper) search simulator the levels run there (plus its baseline run
     and at most one refinement) and only the leading effects' best levels reach the full
@@ -1452,7 +1511,7 @@ def test_grain_radius_factor_of_the_numerics_check(tmp_path):
     and is no scenario field; a factor outside [0.5, 2] and a bad ``--numerics-check`` are errors
     naming the field and the allowed range."""
     scenario = pytest.importorskip("crashdem.scenario")
-    from crashdem.diagnosis.cli import _numerics_scales
+    from crashdem.diagnosis.cli import _grain_scales, _numerics_scales
     from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY, scenario_overrides
     from crashdem.diagnosis.generator_dem import scenario_path
 
@@ -1472,6 +1531,11 @@ def test_grain_radius_factor_of_the_numerics_check(tmp_path):
         _numerics_scales("0.9,x")
     with pytest.raises(ValueError, match=r"--numerics-check='0.3'.*factor 0.3 is outside"):
         _numerics_scales("0.3")
+    # the grain check's factors are read the same way, named by their own option
+    assert _grain_scales(None) == () and _grain_scales("0.9,1.1") == (0.9, 1.1)
+    assert _grain_scales("off") == ()
+    with pytest.raises(ValueError, match=r"--grain-check='2.5'.*factor 2.5 is outside"):
+        _grain_scales("2.5")
 
 
 def test_auto_search_runs_on_a_small_bed_itself(tmp_path):
