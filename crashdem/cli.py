@@ -245,6 +245,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "grain radius times each factor (its own baseline, replicates and "
                         "search) and name the effect only if every factor names it too "
                         "(default off; e.g. 0.9,1.1)")
+    d.add_argument("--grain-check-agree", default="all", choices=("all", "any"),
+                   help="how many of the --grain-check factors must name the effect: all "
+                        "(default) or any (at least one)")
     d.add_argument("--packing-cache", default=None, metavar="DIR|off",
                    help="deposit the beds of the baseline, search and confirmation runs in this "
                         "cache, shared by later diagnoses (default: $CRASHDEM_CACHE/packings or "

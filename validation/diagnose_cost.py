@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import shutil
 import subprocess
 import sys
@@ -124,6 +125,9 @@ def main(argv=None) -> int:
                     metavar="KEY=VALUE",
                     help="a soil value of the truth other than the scenario's, e.g. "
                          "soil.material.young=4e7 (keys: generator_dem.RECALIBRATION_KEYS)")
+    ap.add_argument("--cli-args", default="", metavar="ARGS",
+                    help="more options of crashdem diagnose, e.g. \"--grain-check 1.1,0.9 "
+                         "--grain-check-agree any\"")
     args = ap.parse_args(argv)
     from crashdem.diagnosis.generator_dem import parse_recalibration
 
@@ -144,7 +148,7 @@ def main(argv=None) -> int:
         cmd = [sys.executable, "-m", "crashdem", "diagnose", "--scenario",
                str(ROOT / "validation" / "scenarios" / "drop_s2_h13p70.toml"),
                "--recording", str(rec), "--out", str(diag), "--packing-cache", str(cache),
-               "--run-cache", "off"]
+               "--run-cache", "off", *shlex.split(args.cli_args)]
         t1 = time.perf_counter()
         subprocess.run(cmd, check=True)
         return time.perf_counter() - t1, json.loads((diag / "report.json").read_text())
@@ -174,7 +178,9 @@ def main(argv=None) -> int:
            "diagnosis_wall_s": wall, "truth_wall_s": t_truth, "decision": rep["decision"],
            "baseline_run_wall_s": base_wall,
            "diagnosis_over_baseline_run": wall / base_wall if base_wall else None,
-           "beds_deposited": rep["simulations"]["packing_cache"]["beds_deposited"], "warm": warm}
+           "beds_deposited": rep["simulations"]["packing_cache"]["beds_deposited"], "warm": warm,
+           "grain_check": rep["fit"].get("grain_check"),
+           "grain_check_simulations": rep["simulations"].get("grain_check_simulations")}
     print(f"diagnosis of a default-resolution recording: {wall:.0f} s "
           f"({'within' if wall <= 900 else 'OVER'} the 15 min budget); claimed "
           f"{row['claimed']} {row['parameters']}; full runs {row['full_simulations']}, search "

@@ -409,7 +409,9 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
                                   numerics=numerics, level_beds=level_beds,
-                                  grain_check=grain, **cat_kw)
+                                  grain_check=grain,
+                                  grain_agree=getattr(args, "grain_check_agree", None) or "all",
+                                  **cat_kw)
         rep.simulations["full_search"] = search_how
         if one_bed is not None:
             rep.simulations["imported_bed"] = one_bed

@@ -91,6 +91,9 @@ NUMERICS_RADIUS_SCALES = (0.9, 1.1)
 #: each of these factors (its own baseline, replicates, search levels and candidates), and the
 #: soil effect named only when every one of them names it too. Off by default (``()``)
 GRAIN_CHECK_SCALES: tuple[float, ...] = ()
+#: how many of the grain check's factors must name the effect: "all", or "any" (at least one:
+#: with the model's own grains, two of three grain sizes)
+GRAIN_CHECK_AGREE = "all"
 
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
@@ -127,6 +130,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         numerics: Sequence[float] = NUMERICS_RADIUS_SCALES,
                         level_beds: int | None = None,
                         grain_check: Sequence[float] = GRAIN_CHECK_SCALES,
+                        grain_agree: str = GRAIN_CHECK_AGREE,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -179,9 +183,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         model-free answer, nor with a filter-class mismatch), the whole confirmation is made
         again at each factor -- the baseline run, the screening on it, the replicates, the
         search levels, the candidates and the numerics check, every run with the grain radius
-        times the factor -- and the effect stays named only when each of these names it too;
-        otherwise it is withdrawn and the decision taken again without it (a rival it leaves
-        named meets the same rule). ``fit.grain_check`` records each factor's answer and runs
+        times the factor -- and the effect stays named only when each of these names it too
+        (``grain_agree="all"``) or at least one does (``"any"``); otherwise it is withdrawn
+        and the decision taken again without it (a rival it leaves named meets the same rule).
+        The factors run in turn, and only while the answer is open. ``fit.grain_check``
+        records each factor's answer and runs
+    grain_agree : "all" or "any", see ``grain_check``
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -203,6 +210,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     parameter (``hypotheses[*].full_model``; it replaces the screening's value when both mean
     the same, e.g. a floor or interface depth).
     """
+    if grain_agree not in ("all", "any"):
+        raise ValueError(f"grain_agree={grain_agree!r}: must be 'all' or 'any' (how many of the "
+                         "grain check's factors must name the effect)")
     if level_beds is None:
         level_beds = SEARCH_TIER_LEVEL_BEDS if search_simulator is not None else LEVEL_BEDS
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
@@ -219,26 +229,34 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     d = c.decide(full, tier)
     search_sim = search_simulator if tier is not None else full_simulator
     d, checks = _numerics_decision(c, d, full, tier, search_sim, numerics)
-    grain = []
-    if grain_check and c.grain_checked(d):
-        for f in grain_check:
-            grain.append(_grain_decision(
-                float(f), baseline_signals, recording_signals, full_simulator, top_k=top_k,
-                full_search=full_search, search_simulator=search_simulator,
-                replicates=replicates, numerics=numerics, level_beds=level_beds,
-                **diagnose_kw))
-        while c.grain_checked(d) and any(g["named"] != d.confirmed for g in grain):
-            c.withdrawn = {**c.withdrawn, d.confirmed: _grain_verdict(d.confirmed, grain)}
-            d = c.decide(full, tier)
-            if c.grain_checked(d) and d.confirmed not in {ch["hypothesis"] for ch in checks}:
-                d, more = _numerics_decision(c, d, full, tier, search_sim, numerics)
-                checks += more
+    answers: dict[float, dict[str, Any]] = {}
+
+    def answer(f: float) -> dict[str, Any]:
+        """The confirmation at grain factor ``f`` (made once, when first asked)."""
+        if f not in answers:
+            answers[f] = _grain_decision(
+                f, recording_signals, full_simulator, top_k=top_k, full_search=full_search,
+                search_simulator=search_simulator, replicates=replicates, numerics=numerics,
+                level_beds=level_beds, **diagnose_kw)
+        return answers[f]
+
+    def holds(name: str) -> bool:
+        agree = all if grain_agree == "all" else any
+        return agree(answer(float(f))["named"] == name for f in grain_check)
+
+    while grain_check and c.grain_checked(d) and not holds(d.confirmed):
+        c.withdrawn = {**c.withdrawn, d.confirmed: _grain_verdict(
+            d.confirmed, list(answers.values()), grain_agree)}
+        d = c.decide(full, tier)
+        if c.grain_checked(d) and d.confirmed not in {ch["hypothesis"] for ch in checks}:
+            d, more = _numerics_decision(c, d, full, tier, search_sim, numerics)
+            checks += more
     c.record(full, tier, d, t_full)
     for check in checks:
         c.numerics_record(check, d)
-    if grain:
-        rep.fit["grain_check"] = grain
-        rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in grain)
+    if answers:
+        rep.fit["grain_check"] = {"agree": grain_agree, "factors": list(answers.values())}
+        rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in answers.values())
     return rep
 
 
@@ -285,8 +303,8 @@ class _GrainScaled:
         return [self.sim(ov) for ov in scaled]
 
 
-def _grain_decision(factor: float, baseline_signals: Mapping[str, Signal],
-                    recording_signals: Mapping[str, Signal], full_simulator: Simulator, *,
+def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],
+                    full_simulator: Simulator, *,
                     top_k: int, full_search: bool | Mapping[str, catalogue.FullSearch],
                     search_simulator: Simulator | None,
                     replicates: Sequence[Mapping[str, Any]], numerics: Sequence[float],
@@ -331,15 +349,16 @@ class _Counted:
         return self.sim.map(batch)
 
 
-def _grain_verdict(name: str, grain: Sequence[Mapping[str, Any]]) -> str:
+def _grain_verdict(name: str, grain: Sequence[Mapping[str, Any]], agree: str) -> str:
     """Why a soil effect named at the model's grains is withdrawn by the grain check."""
     each = "; ".join(f"{g['radius_scale']:g}x grains: "
                      + (g["named"] if g["named"] else
                         "nothing (" + " / ".join(g["ambiguous"]) + " not told apart)"
                         if g.get("ambiguous") else "nothing")
                      for g in grain)
-    return (f"the confirmation made again with the grain radius scaled does not name it at "
-            f"every grain size ({each}): the answer is not resolved by the model's numerics")
+    where = "at every grain size" if agree == "all" else "at any other grain size"
+    return (f"the confirmation made again with the grain radius scaled does not name it "
+            f"{where} ({each}): the answer is not resolved by the model's numerics")
 
 
 @dataclass

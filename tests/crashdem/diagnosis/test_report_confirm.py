@@ -298,14 +298,15 @@ def test_grain_check_names_only_what_every_grain_size_names(tmp_path):
                          if not k.startswith("physics.soil_layering.")}
         return rom(overrides)
 
-    def run(sim, grain_check=(1.3,)):
+    def run(sim, grain_check=(1.3,), agree="all"):
         calls.clear()
         return screen_then_confirm(simulate(RomParams()), recording, sim, top_k=0,
-                                   full_search=fs, grain_check=grain_check)
+                                   full_search=fs, grain_check=grain_check, grain_agree=agree)
 
     kept = run(rom)
     assert kept.missing_physics == "soil_layering", kept.decision
-    (g,) = kept.fit["grain_check"]
+    assert kept.fit["grain_check"]["agree"] == "all"
+    (g,) = kept.fit["grain_check"]["factors"]
     assert g["radius_scale"] == 1.3 and g["named"] == "soil_layering"
     # the check's runs: at 1.3 x, and its numerics check's at 1.3 x 0.9 and 1.3 x 1.1
     scaled = [c for c in calls if round(c.get(RADIUS_SCALE_KEY, 1.0), 9) not in (0.9, 1.0, 1.1)]
@@ -313,13 +314,29 @@ def test_grain_check_names_only_what_every_grain_size_names(tmp_path):
     assert "withdrawn" not in kept.decision
 
     gone = run(fading)
-    assert gone.fit["grain_check"][0]["named"] is None
+    assert gone.fit["grain_check"]["factors"][0]["named"] is None
     assert gone.missing_physics is None, gone.decision
     assert ("soil_layering withdrawn: the confirmation made again with the grain radius scaled "
             "does not name it at every grain size (1.3x grains: nothing)") in gone.decision
     write_report(gone, tmp_path, plots=False)
     assert "named, then withdrawn: the confirmation made again" in (
         tmp_path / "report.md").read_text()
+
+    # two factors, one on each side of where the layering fades: "all" withdraws it at the
+    # first that does not name it, "any" keeps it at the first that does; neither runs the
+    # other factor
+    both = run(fading, (1.3, 1.2))
+    assert both.missing_physics is None
+    assert [g["radius_scale"] for g in both.fit["grain_check"]["factors"]] == [1.3]
+    one = run(fading, (1.2, 1.3), agree="any")
+    assert one.missing_physics == "soil_layering", one.decision
+    assert [(g["radius_scale"], g["named"]) for g in one.fit["grain_check"]["factors"]] == [
+        (1.2, "soil_layering")]
+    none = run(fading, (1.3,), agree="any")
+    assert none.missing_physics is None
+    assert "does not name it at any other grain size (1.3x grains: nothing)" in none.decision
+    with pytest.raises(ValueError, match="grain_agree='most': must be 'all' or 'any'"):
+        run(rom, agree="most")
 
     assert GRAIN_CHECK_SCALES == ()
     off = run(fading, GRAIN_CHECK_SCALES)
