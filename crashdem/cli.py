@@ -243,9 +243,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--grain-check", default=None, metavar="F[,F...]|off",
                    help="when a soil effect is named, make the whole confirmation again with the "
                         "grain radius times each factor (its own baseline, replicates and "
-                        "search) and name the effect only if every factor names it too "
-                        "(default off; e.g. 0.9,1.1)")
-    d.add_argument("--grain-check-agree", default="all", choices=("all", "any"),
+                        "search) and name the effect only if those name it too, see "
+                        "--grain-check-agree (default off; e.g. 1.1,0.9)")
+    d.add_argument("--grain-check-agree", default=None, choices=("all", "any"),
                    help="how many of the --grain-check factors must name the effect: all "
                         "(default) or any (at least one)")
     d.add_argument("--packing-cache", default=None, metavar="DIR|off",

@@ -300,6 +300,7 @@ def diagnose_command(args: argparse.Namespace) -> int:
 def _diagnose_command(args: argparse.Namespace) -> int:
     from crashdem import scenario as sc
     from crashdem.diagnosis import diagnose, screen_then_confirm, working_rate, write_report
+    from crashdem.diagnosis.confirm import GRAIN_CHECK_AGREE
     from crashdem.recordings import read_recording
     from crashdem.runcache import from_option as run_cache_option
 
@@ -410,8 +411,8 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   search_simulator=search_sim, replicates=reps,
                                   numerics=numerics, level_beds=level_beds,
                                   grain_check=grain,
-                                  grain_agree=getattr(args, "grain_check_agree", None) or "all",
-                                  **cat_kw)
+                                  grain_agree=getattr(args, "grain_check_agree", None)
+                                  or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
         if one_bed is not None:
             rep.simulations["imported_bed"] = one_bed

@@ -220,6 +220,66 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
         raise ValueError(f"level_beds={level_beds!r}: must be an integer >= 1 (beds per search "
                          "level of an effect that deposits its own bed)")
+    p = _confirm_pass(baseline_signals, recording_signals, full_simulator, search_simulator,
+                      top_k=top_k, full_search=full_search, replicates=replicates,
+                      level_beds=level_beds, numerics=numerics, **diagnose_kw)
+    rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
+    answers: dict[float, dict[str, Any]] = {}
+
+    def answer(f: float) -> dict[str, Any]:
+        """The confirmation at grain factor ``f`` (made once, when first asked)."""
+        if f not in answers:
+            answers[f] = _grain_decision(
+                f, recording_signals, full_simulator, search_simulator, top_k=top_k,
+                full_search=full_search, replicates=replicates, numerics=numerics,
+                level_beds=level_beds, **diagnose_kw)
+        return answers[f]
+
+    def holds(name: str) -> bool:
+        agree = all if grain_agree == "all" else any
+        return agree(answer(float(f))["named"] == name for f in grain_check)
+
+    while grain_check and c.grain_checked(d) and not holds(d.confirmed):
+        c.withdrawn = {**c.withdrawn,
+                       d.confirmed: _grain_verdict(list(answers.values()), grain_agree)}
+        d = c.decide(full, tier)
+        if c.grain_checked(d) and d.confirmed not in {ch["hypothesis"] for ch in checks}:
+            d, more = _numerics_decision(c, d, full, tier, p.search_sim, numerics)
+            checks += more
+    c.record(full, tier, d, p.t_full)
+    for check in checks:
+        c.numerics_record(check, d)
+    if answers:
+        rep.fit["grain_check"] = {"agree": grain_agree, "factors": list(answers.values())}
+        rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in answers.values())
+    return rep
+
+
+@dataclass
+class _Pass:
+    """One confirmation made up to its decision: the screened report, its confirmation, the
+    tiers, the decision after the numerics check, the checks made, the simulator the search
+    ran on and the wall time of the tiers."""
+
+    rep: Report
+    c: _Confirmation
+    full: _FullTier
+    tier: _SearchTier | None
+    d: _Decision
+    checks: list[dict[str, Any]]
+    search_sim: Simulator
+    t_full: float
+
+
+def _confirm_pass(baseline_signals: Mapping[str, Signal],
+                  recording_signals: Mapping[str, Signal], full_simulator: Simulator,
+                  search_simulator: Simulator | None, *, top_k: int,
+                  full_search: bool | Mapping[str, catalogue.FullSearch],
+                  replicates: Sequence[Mapping[str, Any]], level_beds: int,
+                  numerics: Sequence[float], **diagnose_kw) -> _Pass:
+    """The screening of ``recording_signals`` against ``baseline_signals``, the search and
+    full tiers, the decision and the numerics check (``screen_then_confirm``'s steps before
+    the grain check and the report; the grain check makes one per factor)."""
     rep = diagnose(baseline_signals, recording_signals, **diagnose_kw)
     c = _Confirmation(rep, top_k, full_search, diagnose_kw.get("hypotheses"), replicates,
                       level_beds, baseline_signals)
@@ -231,35 +291,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     d = c.decide(full, tier)
     search_sim = search_simulator if tier is not None else full_simulator
     d, checks = _numerics_decision(c, d, full, tier, search_sim, numerics)
-    answers: dict[float, dict[str, Any]] = {}
-
-    def answer(f: float) -> dict[str, Any]:
-        """The confirmation at grain factor ``f`` (made once, when first asked)."""
-        if f not in answers:
-            answers[f] = _grain_decision(
-                f, recording_signals, full_simulator, top_k=top_k, full_search=full_search,
-                search_simulator=search_simulator, replicates=replicates, numerics=numerics,
-                level_beds=level_beds, **diagnose_kw)
-        return answers[f]
-
-    def holds(name: str) -> bool:
-        agree = all if grain_agree == "all" else any
-        return agree(answer(float(f))["named"] == name for f in grain_check)
-
-    while grain_check and c.grain_checked(d) and not holds(d.confirmed):
-        c.withdrawn = {**c.withdrawn, d.confirmed: _grain_verdict(
-            d.confirmed, list(answers.values()), grain_agree)}
-        d = c.decide(full, tier)
-        if c.grain_checked(d) and d.confirmed not in {ch["hypothesis"] for ch in checks}:
-            d, more = _numerics_decision(c, d, full, tier, search_sim, numerics)
-            checks += more
-    c.record(full, tier, d, t_full)
-    for check in checks:
-        c.numerics_record(check, d)
-    if answers:
-        rep.fit["grain_check"] = {"agree": grain_agree, "factors": list(answers.values())}
-        rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in answers.values())
-    return rep
+    return _Pass(rep, c, full, tier, d, checks, search_sim, t_full)
 
 
 def _numerics_decision(c: _Confirmation, d: _Decision, full: _FullTier,
@@ -286,19 +318,22 @@ def _numerics_decision(c: _Confirmation, d: _Decision, full: _FullTier,
 
 class _GrainScaled:
     """A simulator whose every run has its grain radius times ``factor``
-    (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has)."""
+    (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has); ``n`` counts
+    the runs asked for (``map`` batches included)."""
 
     def __init__(self, sim: Simulator, factor: float):
-        self.sim, self.factor = sim, float(factor)
+        self.sim, self.factor, self.n = sim, float(factor), 0
 
     def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
         return {**overrides,
                 RADIUS_SCALE_KEY: self.factor * float(overrides.get(RADIUS_SCALE_KEY, 1.0))}
 
     def __call__(self, overrides: Mapping[str, Any]) -> Any:
+        self.n += 1
         return self.sim(self.scaled(overrides))
 
     def map(self, batch: list[Mapping[str, Any]]) -> list[Any]:
+        self.n += len(batch)
         scaled = [self.scaled(ov) for ov in batch]
         if hasattr(self.sim, "map"):
             return list(self.sim.map(scaled))  # type: ignore[attr-defined]
@@ -306,52 +341,26 @@ class _GrainScaled:
 
 
 def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],
-                    full_simulator: Simulator, *,
-                    top_k: int, full_search: bool | Mapping[str, catalogue.FullSearch],
-                    search_simulator: Simulator | None,
-                    replicates: Sequence[Mapping[str, Any]], numerics: Sequence[float],
-                    level_beds: int, **diagnose_kw) -> dict[str, Any]:
-    """One factor of the grain check: the confirmation made again, every run (the baseline
-    first) with the grain radius times ``factor``; what it names and how many runs it made."""
+                    full_simulator: Simulator, search_simulator: Simulator | None,
+                    **confirm_kw) -> dict[str, Any]:
+    """One factor of the grain check: the confirmation made again (``_confirm_pass``), every
+    run (the baseline first) with the grain radius times ``factor``; what it names and how
+    many runs it made. The baseline's raw channels are not passed on (the check is not made
+    with the recording at another filter class, ``_Confirmation.grain_checked``)."""
     t0 = time.perf_counter()
     full = _GrainScaled(full_simulator, factor)
     search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
-    counted = _Counted(full)
-    counted_search = _Counted(search) if search is not None else None
-    base = counted({})
-    kw = {k: v for k, v in diagnose_kw.items() if k != "baseline_raw"}
-    rep = diagnose(base, recording_signals, **kw)
-    c = _Confirmation(rep, top_k, full_search, kw.get("hypotheses"), replicates, level_beds, base)
-    tier = (c.search_tier(counted_search) if c.searched and counted_search is not None
-            else None)
-    ft = c.full_tier(counted, tier)
-    d = c.decide(ft, tier)
-    d, _ = _numerics_decision(c, d, ft, tier, counted_search if tier is not None else counted,
-                              numerics)
-    runs = counted.n + (counted_search.n if counted_search is not None else 0)
+    kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
+    d = _confirm_pass(full({}), recording_signals, full, search, **kw).d
     return {"radius_scale": factor, "named": d.confirmed,
             "ambiguous": list(d.ambiguous) if d.ambiguous else None,
             "value": d.best.get("search_value") if d.confirmed else None,
             "score": d.best.get("score") if d.confirmed else None,
-            "runs": runs, "wall_time_s": time.perf_counter() - t0}
+            "runs": full.n + (search.n if search is not None else 0),
+            "wall_time_s": time.perf_counter() - t0}
 
 
-class _Counted:
-    """A simulator counting the runs it is asked for (``map`` batches included)."""
-
-    def __init__(self, sim: Any):
-        self.sim, self.n = sim, 0
-
-    def __call__(self, overrides: Mapping[str, Any]) -> Any:
-        self.n += 1
-        return self.sim(overrides)
-
-    def map(self, batch: list[Mapping[str, Any]]) -> list[Any]:
-        self.n += len(batch)
-        return self.sim.map(batch)
-
-
-def _grain_verdict(name: str, grain: Sequence[Mapping[str, Any]], agree: str) -> str:
+def _grain_verdict(grain: Sequence[Mapping[str, Any]], agree: str) -> str:
     """Why a soil effect named at the model's grains is withdrawn by the grain check."""
     each = "; ".join(f"{g['radius_scale']:g}x grains: "
                      + (g["named"] if g["named"] else
@@ -1327,7 +1336,7 @@ class _Confirmation:
         acceleration 0.762 -> 0.730, where the run plotted scores 0.899 (0.827)."""
         rep = self.rep
         full = rep.fit.get("after_full")
-        if d.confirmed is None or not full or "aligned" not in d.best:
+        if d.confirmed is None or not full:
             return
         rep.fit["after_screening_refit"] = {
             "hypothesis": rep.fit.get("after_hypothesis"), **rep.fit["after"],
