@@ -319,7 +319,8 @@ def _numerics_decision(c: _Confirmation, d: _Decision, full: _FullTier,
 class _GrainScaled:
     """A simulator whose every run has its grain radius times ``factor``
     (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has); ``n`` counts
-    the runs asked for (``map`` batches included)."""
+    the runs made: each single run, and a ``map`` batch once it returns (a batch that raises
+    is run again one by one by ``_run_full``, and those runs are the ones counted)."""
 
     def __init__(self, sim: Simulator, factor: float):
         self.sim, self.factor, self.n = sim, float(factor), 0
@@ -333,11 +334,13 @@ class _GrainScaled:
         return self.sim(self.scaled(overrides))
 
     def map(self, batch: list[Mapping[str, Any]]) -> list[Any]:
-        self.n += len(batch)
         scaled = [self.scaled(ov) for ov in batch]
         if hasattr(self.sim, "map"):
-            return list(self.sim.map(scaled))  # type: ignore[attr-defined]
-        return [self.sim(ov) for ov in scaled]
+            out = list(self.sim.map(scaled))  # type: ignore[attr-defined]
+        else:
+            out = [self.sim(ov) for ov in scaled]
+        self.n += len(batch)
+        return out
 
 
 def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],

@@ -269,6 +269,34 @@ def test_numerics_check_widens_a_named_value_by_its_grain_size_shift(tmp_path):
     assert "numerics_simulations" not in off.simulations
 
 
+def test_grain_scaled_simulator_counts_each_run_once():
+    """The grain check's simulator scales every run's grain radius and counts the runs made. A
+    batch in which one run fails raises; ``_run_full`` then runs the batch one by one, and the
+    count is those runs, not the failed batch as well (each request counted once)."""
+    from crashdem.diagnosis.confirm import RADIUS_SCALE_KEY, _GrainScaled, _run_full
+
+    seen = []
+
+    class Sim:
+        def __call__(self, ov):
+            seen.append(ov[RADIUS_SCALE_KEY])
+            if ov.get("fail"):
+                raise ValueError("the full model cannot run this")
+            return ov[RADIUS_SCALE_KEY]
+
+        def map(self, batch):
+            return [self(ov) for ov in batch]
+
+    g = _GrainScaled(Sim(), 1.1)
+    assert g.map([{}, {RADIUS_SCALE_KEY: 0.9}]) == pytest.approx([1.1, 0.99])
+    assert g.n == 2
+    outs = _run_full(g, [("a", {}), ("b", {"fail": True}), ("c", {})])
+    assert outs[0] == pytest.approx(1.1) and outs[2] == pytest.approx(1.1)
+    assert isinstance(outs[1], ValueError)
+    assert g.n == 2 + 3
+    assert g({}) == pytest.approx(1.1) and g.n == 6
+
+
 def test_grain_check_names_only_what_every_grain_size_names(tmp_path):
     """The grain check makes the whole confirmation again with every run's grain radius times
     a factor (its own baseline run, screening, search and numerics check). The recording: the
