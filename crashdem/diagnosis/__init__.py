@@ -107,6 +107,26 @@ class Report:
     #: the hypothesis set of the screening model (drop or planar)
     catalogue: catalogue.Catalogue = field(repr=False, default=catalogue.DROP)
 
+    def rating_best_alignment(self) -> dict[str, Any] | None:
+        """The overall rating before and after (the baseline and the refitted curve of the
+        plots, else the baseline again) at their best common alignment within
+        ``fit.SCORE_SHIFT_S`` (``fit.rating_at_best_alignment``: the standard's phase search is
+        bistable on a monotone channel, so the rating at the least-squares alignment can move
+        by 0.4 with half a millisecond); None without the signals or the ISO rating."""
+        from crashdem.diagnosis.fit import SCORE_SHIFT_S, rating_at_best_alignment
+
+        chans = [ch for ch in self.channels if ch in self.recording and ch in self.baseline]
+        if not chans:
+            return None
+        win = self.fit.get("score_window_s")
+        win = (float(win[0]), float(win[1])) if win else None
+        after = self.refitted if all(ch in self.refitted for ch in chans) else self.baseline
+        out = {k: rating_at_best_alignment(self.recording, sims, chans, win)
+               for k, sims in (("before", self.baseline), ("after", after))}
+        if any(v is None for v in out.values()):
+            return None
+        return {"tolerance_s": SCORE_SHIFT_S, **out}
+
     def to_dict(self) -> dict[str, Any]:
         """Everything ``report.json`` holds (signals excluded)."""
         return {
@@ -119,7 +139,7 @@ class Report:
             "missing_physics": self.missing_physics,
             "best": self.best,
             "decision": self.decision,
-            "fit": self.fit,
+            "fit": {**self.fit, "rating_best_alignment": self.rating_best_alignment()},
             "remaining_mismatch": [w.to_dict() for w in self.after_mismatch],
             "simulations": self.simulations,
             "catalogue": self.catalogue.describe(),

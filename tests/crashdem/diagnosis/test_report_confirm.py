@@ -50,6 +50,20 @@ def test_write_report_files(layering_case, tmp_path):
     for p in paths["plots"]:
         with open(p, "rb") as fh:
             assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+    # beside the rating at the least-squares alignment, the rating at the best one within
+    # SCORE_SHIFT_S: of the baseline and of the refitted curve the plots show
+    from crashdem.diagnosis.fit import SCORE_SHIFT_S, rating_at_best_alignment
+
+    best = d["fit"]["rating_best_alignment"]
+    assert best["tolerance_s"] == SCORE_SHIFT_S
+    win = tuple(d["fit"]["score_window_s"])
+    for k, sims in (("before", rep.baseline), ("after", rep.refitted)):
+        again = rating_at_best_alignment(rep.recording, sims, rep.channels, win)
+        assert best[k]["overall"] == pytest.approx(again["overall"])
+        assert best[k]["overall"] >= d["fit"][k]["overall"] - 1e-12
+        assert abs(best[k]["shift_s"]) <= SCORE_SHIFT_S
+    assert best["after"]["overall"] > best["before"]["overall"]
+    assert "At the best common alignment within 2 ms of it: before " in md
 
 
 def test_screen_then_confirm_counts_full_simulations(layering_case):
