@@ -39,7 +39,8 @@ from crashdem.diagnosis.mismatch import NoiseEstimate, align
 from crashdem.signal import Signal
 
 __all__ = ["FitProblem", "FitResult", "rating_at_best_alignment", "score_signals",
-           "fit_hypothesis", "fit_variants", "rank", "metric_name", "ACCEPT_MARGIN", "MIN_SCORE_GAIN", "WITHIN_NOISE_RATIO"]
+           "fit_hypothesis", "fit_variants", "rank", "metric_name", "ACCEPT_MARGIN",
+           "MIN_SCORE_GAIN", "WITHIN_NOISE_RATIO"]
 
 Simulator = Callable[[dict[str, float]], Mapping[str, Signal]]
 

@@ -192,7 +192,8 @@ def to_markdown(report, plots: list[str] | None = None) -> str:
                   f"{_at('before')}, after {_at('after')}. The standard's phase search is "
                   f"bistable on a monotone channel such as a velocity (its correlation is ~0.99 "
                   f"at every lag), so half a millisecond of alignment can move that channel's "
-                  f"rating by 0.4: a large difference between the two is that alignment, not the fit."]
+                  f"rating by 0.4: a large difference between the two is that alignment, not "
+                  f"the fit."]
     scr = fit.get("after_screening_refit")
     if scr:
         each = ", ".join(f"{ch} {_fmt(v['score'])}" for ch, v in scr["per_channel"].items())
