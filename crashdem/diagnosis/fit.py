@@ -180,16 +180,20 @@ def rating_at_best_alignment(recording: Mapping[str, Signal], aligned: Mapping[s
     """
     if metric_name() != "ISO/TS 18571 overall rating":
         return None
+    # the windowed recording of each channel, made once for every shift
+    refs: dict[str, tuple[np.ndarray, Signal]] = {}
+    for ch in channels:
+        rec = recording[ch]
+        m = (np.ones(rec.t.shape, bool) if window is None
+             else (rec.t >= window[0]) & (rec.t <= window[1]))
+        refs[ch] = (m, Signal(rec.name, rec.t[m], rec.data[m], rec.unit, rec.cfc))
     best: dict[str, Any] | None = None
     for d in _shifts():
         each = {}
         for ch in channels:
-            rec, sim = recording[ch], aligned[ch]
-            m = (np.ones(rec.t.shape, bool) if window is None
-                 else (rec.t >= window[0]) & (rec.t <= window[1]))
-            shifted = np.interp(rec.t[m], rec.t + d, sim.data) if d else sim.data[m]
-            each[ch] = _iso_rating(Signal(rec.name, rec.t[m], rec.data[m], rec.unit, rec.cfc),
-                                   Signal(sim.name, rec.t[m], shifted, sim.unit, sim.cfc))
+            (m, ref), sim, t = refs[ch], aligned[ch], recording[ch].t
+            shifted = np.interp(ref.t, t + d, sim.data) if d else sim.data[m]
+            each[ch] = _iso_rating(ref, Signal(sim.name, ref.t, shifted, sim.unit, sim.cfc))
         if any(v is None for v in each.values()):
             return None if d == 0.0 else best
         mean = float(np.mean(list(each.values())))
