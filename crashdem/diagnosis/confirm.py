@@ -1715,7 +1715,7 @@ def _outranked_sentence(d: _Decision) -> str:
     claim, rival = _outranked_pair(d)
     if rival["score"] >= claim["score"]:
         return (f"{d.ambiguous[1]} fits the recording with a higher likelihood and a higher "
-                f"score than {d.ambiguous[0]} (the screening's claim) (Delta BIC "
+                f"score than {d.ambiguous[0]}, the screening's claim (Delta BIC "
                 f"{rival['delta_bic_vs_reference']:.1f} against "
                 f"{claim['delta_bic_vs_reference']:.1f}, score {rival['score']:.3f} against "
                 f"{claim['score']:.3f}), but not by the score margin ({CONFIRM_MIN_GAIN:g}) "
