@@ -46,9 +46,10 @@ def without_wall_times(x: Any) -> Any:
     return x
 
 
-def to_json(report) -> str:
-    """The report as JSON text (what ``report.json`` holds)."""
-    return json.dumps(_clean(report.to_dict()), indent=2, sort_keys=False)
+def to_json(report, d: dict[str, Any] | None = None) -> str:
+    """The report as JSON text (what ``report.json`` holds); ``d``: ``report.to_dict()`` when
+    the caller has it already (it rates the fit again at every alignment it tries)."""
+    return json.dumps(_clean(report.to_dict() if d is None else d), indent=2, sort_keys=False)
 
 
 def _fmt(v: float | None, nd: int = 3) -> str:
@@ -82,11 +83,12 @@ def _unit(unit: str | None) -> str:
     return "" if unit in (None, "", "1") else unit
 
 
-def to_markdown(report, plots: list[str] | None = None) -> str:
-    """A readable summary of the report."""
+def to_markdown(report, plots: list[str] | None = None,
+                d: dict[str, Any] | None = None) -> str:
+    """A readable summary of the report; ``d`` as in :func:`to_json`."""
     from crashdem.diagnosis import CONFIRM_MIN_GAIN, REPLICATE
 
-    d = report.to_dict()
+    d = report.to_dict() if d is None else d
     fit = d["fit"]
     lines = ["# crashdem diagnosis report", ""]
     mp = d["missing_physics"]
@@ -401,8 +403,9 @@ def write_report(report, out_dir, plots: bool = True) -> dict[str, str | list[st
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     pngs = plot_overlays(report, out) if plots else []
+    d = report.to_dict()  # once: the rating at the best alignment is not free (~0.3 s)
     jp = out / "report.json"
-    jp.write_text(to_json(report), encoding="utf-8")
+    jp.write_text(to_json(report, d), encoding="utf-8")
     mp = out / "report.md"
-    mp.write_text(to_markdown(report, pngs), encoding="utf-8")
+    mp.write_text(to_markdown(report, pngs, d), encoding="utf-8")
     return {"json": str(jp), "md": str(mp), "plots": pngs}
