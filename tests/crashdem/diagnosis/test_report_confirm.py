@@ -519,6 +519,34 @@ def test_verdict_of_a_screening_claim_that_another_effect_replaces(layering_case
     assert "cohesion's full run beats it" in why["soil_layering"]
 
 
+def _layer_share_simulator(case, claim: float, rival: float, replicate: float | None = None):
+    """A full simulator on the screening model whose layering runs carry the share ``claim`` of
+    ``case``'s concealed layer's change on the baseline, its cohesion runs the share ``rival``
+    and its replicate packings (``scenario.seed``) the share ``replicate`` (None: the
+    baseline); every other run is the scenario's."""
+    from crashdem.signal import Signal
+
+    inner = _scenario_rom_simulator([], case.recording)
+    v = case.values
+    truth = {"physics.soil_layering.enabled": True,
+             "physics.soil_layering.depth": v["interface_depth"],
+             "physics.soil_layering.lower_young_factor": v["strength_ratio"]}
+
+    def full(ov):
+        share = (claim if ov.get("physics.soil_layering.enabled") else
+                 rival if ov.get("physics.cohesion.enabled") else
+                 replicate if "scenario.seed" in ov else None)
+        base = {k: x for k, x in ov.items() if k != "scenario.seed"
+                and not k.startswith(("physics.soil_layering.", "physics.cohesion."))}
+        off = inner(base)
+        if share is None:
+            return off
+        on = inner({**base, **truth})
+        return {ch: Signal(ch, s.t, share * s.data + (1.0 - share) * off[ch].data, s.unit,
+                           s.cfc) for ch, s in on.items()}
+    return full
+
+
 def test_a_claim_outranked_in_likelihood_by_a_decisive_rival_is_not_named(layering_case):
     """The screening claims the layering and its full runs stand (80 % of the concealed layer's
     change on the baseline); a searched cohesion level fits the recording with a higher
@@ -529,28 +557,9 @@ def test_a_claim_outranked_in_likelihood_by_a_decisive_rival_is_not_named(layeri
     floor's 0.5 m level 30.8 (0.751), and the layer was named, wrongly. Control: a rival of
     lower likelihood (75 %) leaves the claim named."""
     from crashdem.diagnosis.confirm import CONFIRM_MIN_GAIN
-    from crashdem.signal import Signal
-
-    inner = _scenario_rom_simulator([], layering_case.recording)
-    v = layering_case.values
-    # every layering run and every cohesion run carries a share of the concealed layer's change
-    truth = {"physics.soil_layering.enabled": True,
-             "physics.soil_layering.depth": v["interface_depth"],
-             "physics.soil_layering.lower_young_factor": v["strength_ratio"]}
 
     def mixed(share_claim, share_rival):
-        def full(ov):
-            share = (share_claim if ov.get("physics.soil_layering.enabled") else
-                     share_rival if ov.get("physics.cohesion.enabled") else None)
-            base = {k: v for k, v in ov.items()
-                    if not k.startswith(("physics.soil_layering.", "physics.cohesion."))}
-            off = inner(base)
-            if share is None:
-                return off
-            on = inner({**base, **truth})
-            return {ch: Signal(ch, s.t, share * s.data + (1.0 - share) * off[ch].data, s.unit,
-                               s.cfc) for ch, s in on.items()}
-        return full
+        return _layer_share_simulator(layering_case, share_claim, share_rival)
 
     kw = dict(top_k=2, hypotheses=["soil_layering", "cohesion", "initial_conditions"])
     base = simulate(RomParams())
@@ -586,28 +595,9 @@ def test_a_standing_claim_with_a_rival_better_on_both_counts_is_not_named(layeri
     (Delta BIC 15.4, score 0.842; floor 10.5, 0.837) was named beside the floor's 0.9 m level
     (20.5, 0.847). Control: a rival of 75 % (worse than the floor) leaves the claim named."""
     from crashdem.diagnosis.confirm import CONFIRM_MIN_GAIN
-    from crashdem.signal import Signal
-
-    inner = _scenario_rom_simulator([], layering_case.recording)
-    v = layering_case.values
-    truth = {"physics.soil_layering.enabled": True,
-             "physics.soil_layering.depth": v["interface_depth"],
-             "physics.soil_layering.lower_young_factor": v["strength_ratio"]}
 
     def mixed(share_rival):
-        def full(ov):
-            share = (0.8 if ov.get("physics.soil_layering.enabled") else
-                     share_rival if ov.get("physics.cohesion.enabled") else
-                     0.78 if "scenario.seed" in ov else None)
-            base = {k: x for k, x in ov.items() if k != "scenario.seed"
-                    and not k.startswith(("physics.soil_layering.", "physics.cohesion."))}
-            off = inner(base)
-            if share is None:
-                return off
-            on = inner({**base, **truth})
-            return {ch: Signal(ch, s.t, share * s.data + (1.0 - share) * off[ch].data, s.unit,
-                               s.cfc) for ch, s in on.items()}
-        return full
+        return _layer_share_simulator(layering_case, 0.8, share_rival, replicate=0.78)
 
     kw = dict(top_k=2, hypotheses=["soil_layering", "cohesion", "initial_conditions"],
               replicates=[{"scenario.seed": 2}, {"scenario.seed": 3}])
