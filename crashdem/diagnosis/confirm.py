@@ -1030,7 +1030,7 @@ class _Confirmation:
             (r for r in best_h.values() if r is not screened and _decisive(r, floor)
              and r["hypothesis"] not in unheld),
             key=lambda r: -r["delta_bic_vs_reference"])
-        ambiguous, outranked = None, False
+        ambiguous, outranked_by = None, None
         if rivals:
             top = rivals[0]
             if len(rivals) > 1 and (top["delta_bic_vs_reference"]
@@ -1044,24 +1044,22 @@ class _Confirmation:
                                   > screened["delta_bic_vs_reference"]):
                 # the claim would stand by its score alone: a decisive rival fits the
                 # recording with a higher likelihood, which ranks effects everywhere else
-                outranked = True
-                ambiguous = [screened["hypothesis"], top["hypothesis"]]
-                rep.fit["confirmation_ambiguous"] = _pair_record((screened, top))
-                confirmed, best = None, full.rows[0]
-        if claim_stood and best is screened and ambiguous is None and not self.model_free:
+                outranked_by = top
+        if (outranked_by is None and claim_stood and best is screened and ambiguous is None
+                and not self.model_free):
             # the claim stands by the lenient rule (not decisively worse than the floor); a
             # rival that beats it in likelihood *and* score, and the floor in both, is held
             # to the score margin over the floor that the claim was not held to
-            both = [r for r in best_h.values() if r is not screened
-                    and r["hypothesis"] not in unheld and _contends(r, floor)
-                    and r["delta_bic_vs_reference"] > screened["delta_bic_vs_reference"]
-                    and r["score"] > screened["score"]]
-            if both:
-                top = max(both, key=lambda r: r["delta_bic_vs_reference"])
-                outranked = True
-                ambiguous = [screened["hypothesis"], top["hypothesis"]]
-                rep.fit["confirmation_ambiguous"] = _pair_record((screened, top))
-                confirmed, best = None, full.rows[0]
+            outranked_by = max((r for r in best_h.values() if r is not screened
+                                and r["hypothesis"] not in unheld and _contends(r, floor)
+                                and r["delta_bic_vs_reference"]
+                                > screened["delta_bic_vs_reference"]
+                                and r["score"] > screened["score"]),
+                               key=lambda r: r["delta_bic_vs_reference"], default=None)
+        if outranked_by is not None:
+            ambiguous = [screened["hypothesis"], outranked_by["hypothesis"]]
+            rep.fit["confirmation_ambiguous"] = _pair_record((screened, outranked_by))
+            confirmed, best = None, full.rows[0]
         contested = None
         if confirmed is not None and not self.model_free:
             contested = self._likelihood_rival(confirmed, best, tier)
@@ -1075,7 +1073,7 @@ class _Confirmation:
                                          "value": contested.get("value")}}
                 confirmed, best = None, full.rows[0]
         return _Decision(confirmed, best, screened, claim_stood, ambiguous, best_h, unsupported,
-                         contested, unheld, outranked)
+                         contested, unheld, outranked_by is not None)
 
     def _likelihood_rival(self, name: str, run: Row,
                           tier: _SearchTier | None) -> dict[str, Any] | None:

@@ -116,6 +116,11 @@ def event_window(rec: Signal, t0: float, fraction: float = EVENT_FRACTION,
     return t0, min(t1, float(rec.t[-1]))
 
 
+def _window_mask(t: np.ndarray, window: tuple[float, float] | None) -> np.ndarray:
+    """The samples of the time axis ``t`` inside the scoring ``window`` (all without one)."""
+    return np.ones(t.shape, bool) if window is None else (t >= window[0]) & (t <= window[1])
+
+
 def score_signals(rec: Signal, sim: Signal, window: tuple[float, float] | None = None
                   ) -> dict[str, float]:
     """Similarity of an aligned simulated channel (same time base) to the recording.
@@ -132,7 +137,7 @@ def score_signals(rec: Signal, sim: Signal, window: tuple[float, float] | None =
     channel unit), ``timing_error_s`` (time of the simulated maximum minus the recorded one)
     and ``rms_error`` (channel unit).
     """
-    m = np.ones(rec.t.shape, bool) if window is None else (rec.t >= window[0]) & (rec.t <= window[1])
+    m = _window_mask(rec.t, window)
     r = rec.data[m]
     s = sim.data[m]
     t = rec.t[m]
@@ -184,8 +189,7 @@ def rating_at_best_alignment(recording: Mapping[str, Signal], aligned: Mapping[s
     refs: dict[str, tuple[np.ndarray, Signal]] = {}
     for ch in channels:
         rec = recording[ch]
-        m = (np.ones(rec.t.shape, bool) if window is None
-             else (rec.t >= window[0]) & (rec.t <= window[1]))
+        m = _window_mask(rec.t, window)
         refs[ch] = (m, Signal(rec.name, rec.t[m], rec.data[m], rec.unit, rec.cfc))
     best: dict[str, Any] | None = None
     for d in _shifts():
