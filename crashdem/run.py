@@ -186,6 +186,7 @@ def impact_materials(scen: Scenario, packing) -> list:
         e = scen["soil.restitution"]
         if scen["physics.contact_damping.enabled"]:
             e = scen["physics.contact_damping.restitution"]
+            kw["dashpot_tension"] = bool(scen["physics.contact_damping.tension"])
         if e is not None:
             kw["restitution"] = e
         mats.append(replace(m, **kw) if kw else m)

@@ -237,6 +237,7 @@ SCHEMA: dict[str, Any] = {
         "contact_damping": {
             "enabled": B(False, doc="viscous normal contact damping"),
             "restitution": F(0.5, "1", 0, 1, lo_open=True, doc="coefficient of restitution"),
+            "tension": B(False, doc="the dashpot may pull while a contact opens (Yade's CundallStrackVisco and codes like it: a binary rebound at exactly the restitution); false: the contact force never pulls (the rebound is above the restitution)"),
         },
         "sensor_dynamics": {
             "enabled": B(False, doc="accelerometer-mount resonance or a different filter class"),

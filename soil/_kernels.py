@@ -72,7 +72,8 @@ M_PLASTIC = 11
 M_MOMENTS = 12
 M_MU_R = 13  # < 0 = no rolling resistance
 M_DENSITY = 14
-M_NCOL = 15
+M_TENSION = 15  # > 0: the normal dashpot may pull while the contact opens
+M_NCOL = 16
 
 # pair state flags
 BOND_NONE = 0
@@ -660,13 +661,15 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         continue
                 else:
                     cn = 0.0
+                    pulls = False
                     if has_visc:
                         e_pair = min(mat[mi, M_RESTITUTION], mat[mj, M_RESTITUTION])
                         if e_pair < 1.0:
                             m_eff = mass[i] * mass[j] / (mass[i] + mass[j])
                             cn = damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                            pulls = mat[mi, M_TENSION] > 0.0 or mat[mj, M_TENSION] > 0.0
                     fn_old = hf[k, H_FN]
-                    fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot)
+                    fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
                     if cn > 0.0:
                         visc_acc += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
                     fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
@@ -1001,10 +1004,12 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
         delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
             vrx, vry, vrz, nx, ny, nz, fsx0, fsy0, fsz0, n0x, n0y, n0z, twist, ks, dt)
         cn = 0.0
+        pulls = False
         if has_visc:
             e_pair = min(mat[mb, M_RESTITUTION], mat[mi, M_RESTITUTION])
             if e_pair < 1.0:
                 cn = damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+                pulls = mat[mb, M_TENSION] > 0.0 or mat[mi, M_TENSION] > 0.0
         fn_old = 0.0
         mox = 0.0
         moy = 0.0
@@ -1014,7 +1019,7 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             mox = old_hist[lo, 9]
             moy = old_hist[lo, 10]
             moz = old_hist[lo, 11]
-        fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot)
+        fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
         fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
         b_diss[b, 0] += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
         if cn > 0.0:

@@ -3,6 +3,10 @@
 The Python ``Simulation.step`` loop calls the same kernels one by one (needed for prescribed
 motions and triangle meshes); this loop runs them without returning to Python and gives the same
 bits.
+
+Numba's on-disk cache is invalidated per source file only: the compiled functions here inline
+``_kernels``'s, so a change of a kernel this loop calls must come with a change of this file
+(e.g. this list). Kernels changed since: the normal dashpot that may pull (``M_TENSION``).
 """
 
 from __future__ import annotations

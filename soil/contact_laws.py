@@ -216,8 +216,9 @@ def rotate_shear(fx, fy, fz, n0x, n0y, n0z, nx, ny, nz, twist):
 
 
 @jit
-def linear_normal_force(kn: float, delta: float, cn: float, delta_dot: float):
-    """Linear spring (+ optional dashpot) normal force, no tension.
+def linear_normal_force(kn: float, delta: float, cn: float, delta_dot: float,
+                        tension: bool = False):
+    """Linear spring (+ optional dashpot) normal force, no tension unless ``tension``.
 
     Parameters
     ----------
@@ -229,22 +230,27 @@ def linear_normal_force(kn: float, delta: float, cn: float, delta_dot: float):
         Dashpot coefficient [N s/m] (0 = undamped).
     delta_dot : float
         Overlap rate [m/s] (> 0 approaching).
+    tension : bool
+        The dashpot may pull while the contact opens (the overlap still > 0): Yade's
+        ``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco`` and codes like it. Then a head-on
+        binary contact rebounds at exactly the nominal restitution.
 
     Returns
     -------
     fn : float
-        Normal force [N], >= 0.
+        Normal force [N], >= 0 unless ``tension``.
     f_visc : float
         Non-elastic part fn - kn delta [N] (its power f_visc * delta_dot is dissipated).
 
     Notes
     -----
     Cundall & Strack (1979); Yade ``Law2_ScGeom_FrictPhys_CundallStrack``. A damped linear
-    spring goes tensile just before separation; the force is clamped at 0 (no tension).
+    spring goes tensile just before separation; the force is clamped at 0 (no tension), unless
+    ``tension``.
     """
     fe = kn * delta
     fn = fe + cn * delta_dot
-    if fn < 0.0:
+    if fn < 0.0 and not tension:
         fn = 0.0
     return fn, fn - fe
 

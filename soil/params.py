@@ -125,6 +125,11 @@ class Material:
         ks/kn (Yade ``FrictMat.poisson``) [-], in [0, 1].
     restitution : float or None
         Coefficient of restitution e in (0, 1] for viscous normal damping; None = no damping.
+    dashpot_tension : bool
+        The normal dashpot may pull while a contact opens (Yade
+        ``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco``, and codes like it); default False: the
+        contact force never pulls (``contact_laws.linear_normal_force``). No effect without
+        ``restitution``.
     cohesion : Cohesion or None
     rolling : Rolling or None
     name : str
@@ -139,6 +144,7 @@ class Material:
     friction_angle: float  # [rad], in [0, pi/2)
     stiffness_ratio: float = 0.25  # [-], in [0, 1]
     restitution: float | None = None  # [-], in (0, 1] or None
+    dashpot_tension: bool = False
     cohesion: Cohesion | None = None
     rolling: Rolling | None = None
     name: str = "material"
@@ -157,6 +163,8 @@ class Material:
             e = _finite(c, "restitution", self.restitution)
             if not 0.0 < e <= 1.0:
                 _fail(c, "restitution", self.restitution, "must be in (0, 1] or None [-]")
+        if not isinstance(self.dashpot_tension, bool):
+            _fail(c, "dashpot_tension", self.dashpot_tension, "must be a bool")
         if self.cohesion is not None and not isinstance(self.cohesion, Cohesion):
             _fail(c, "cohesion", self.cohesion, "must be a soil.Cohesion or None")
         if self.rolling is not None and not isinstance(self.rolling, Rolling):
@@ -183,12 +191,15 @@ class Material:
         """Rebound ratio of a head-on binary contact of two grains of this material [-]:
         ``restitution`` is the nominal one of the linear spring-dashpot (its ``damping_ratio``,
         as in Yade), and the contact force never pulls, so a contact opens early and rebounds
-        faster (``contact_laws.no_tension_restitution``): 0.253 for e = 0.1, 0.325 for 0.2.
-        1 when e is None or 1. What a rebound measured on grains, or another code's restitution
-        whose dashpot may pull, compares with."""
+        faster (``contact_laws.no_tension_restitution``): 0.253 for e = 0.1, 0.325 for 0.2;
+        e itself with ``dashpot_tension``. 1 when e is None or 1. What a rebound measured on
+        grains, or another code's restitution whose dashpot may pull, compares with."""
         from .contact_laws import rebound_restitution
 
-        return 1.0 if self.restitution is None else rebound_restitution(self.restitution)
+        if self.restitution is None:
+            return 1.0
+        return float(self.restitution) if self.dashpot_tension else rebound_restitution(
+            self.restitution)
 
     def to_dict(self) -> dict:
         """Plain-dict form (nested dataclasses as dicts)."""

@@ -43,6 +43,7 @@ def _material_table(materials: Sequence[Material]) -> np.ndarray:
         tab[m, K.M_RATIO] = mat.stiffness_ratio
         tab[m, K.M_TANPHI] = math.tan(mat.friction_angle)
         tab[m, K.M_RESTITUTION] = 1.0 if mat.restitution is None else mat.restitution
+        tab[m, K.M_TENSION] = 1.0 if mat.dashpot_tension else 0.0
         tab[m, K.M_DENSITY] = mat.density
         tab[m, K.M_ETA_R] = -1.0
         tab[m, K.M_ETA_T] = -1.0

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Mapping
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH",
-           "STIFFER_SOIL_FACTORS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
+           "STIFFER_SOIL_FACTORS", "DAMPING_FORMS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
            "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "Catalogue", "DROP", "drop_catalogue", "planar_catalogue",
            "friction_ratio_from_rolling", "rolling_from_friction_ratio"]
@@ -525,6 +525,18 @@ LAYER_FORMS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("compacted", {"physics.soil_layering.compacted": True}),
 )
 
+#: the two forms of contact damping the drop search runs (``FullSearch.forms``): the normal
+#: dashpot whose contact force never pulls (crashdem's default: a contact opens early, the
+#: rebound is above the restitution) and the dashpot that may pull while the contact opens
+#: (Yade's ``CundallStrackVisco``, and many codes: the rebound is the restitution). The pull
+#: holds the impactor and the grains back as they separate, so a recording made with it reads
+#: as cohesion to a model without it: on the 13.7 m Yade recordings (command line) four of six
+#: damping recordings were named cohesion at its strongest level with the first form alone
+DAMPING_FORMS: tuple[tuple[str, dict[str, Any]], ...] = (
+    ("no_tension", {"physics.contact_damping.tension": False}),
+    ("tension", {"physics.contact_damping.tension": True}),
+)
+
 #: factors of the whole bed's grain modulus that the full tier runs as a no-new-physics
 #: alternative (``stiffer_soil_overrides``): a wrong soil stiffness is a recalibration, and the
 #: screening model's recalibration does not map onto the DEM's modulus, so without these a layer
@@ -571,7 +583,8 @@ DROP_FULL_SEARCH: dict[str, FullSearch] = {
         (3.0e4, 6.0e4, 1.2e5, 2.4e5, 4.8e5), {"physics.cohesion.enabled": True}, "log", "low"),
     "contact_damping": FullSearch(
         "restitution", "1", ("physics.contact_damping.restitution",),
-        (0.1, 0.2, 0.3, 0.5), {"physics.contact_damping.enabled": True}),
+        (0.1, 0.2, 0.3, 0.5), {"physics.contact_damping.enabled": True},
+        forms=DAMPING_FORMS),
     "particle_rotation": FullSearch(
         "rolling_coefficient", "1", ("soil.rolling_coefficient",
                                      "physics.particle_rotation.rolling_coefficient"),

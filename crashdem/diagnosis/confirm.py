@@ -146,9 +146,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     top_k : number of missing-physics hypotheses confirmed (each costs one full simulation)
     full_search : also run, unless a model-free sensor answer stands, every effect of the
         catalogue's ``full_search`` (or of the mapping given) at its levels in the full model's
-        own terms (``catalogue.FullSearch``; drop: 24 levels, 30 runs with the layering's two
-        forms) plus one refinement run of the
-        leading effect; each effect is then judged by its best run
+        own terms (``catalogue.FullSearch``; drop: 24 levels, 34 runs with the two forms of
+        the layering and of the contact damping) plus one refinement run of the leading
+        effect; each effect is then judged by its best run
     search_simulator : run the search on this cheaper simulator instead (e.g. the scenario at
         a coarser resolution), each run anchored on the baseline simulation (baseline + its
         change against the search simulator's own baseline run, ``{}``); the best level of each
@@ -2060,7 +2060,7 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
         h["uncertainty"] = {**h["uncertainty"], fs.parameter: sd}
     if isinstance(h.get("units"), dict):
         h["units"] = {**h["units"], fs.parameter: fs.unit}
-    derived = _derived_values(fs.parameter, x, interval)
+    derived = _derived_values(fs.parameter, x, interval, fs.form)
     if derived:
         h["full_model"]["derived"] = derived
     rep.fit.setdefault("full_search", {})["named"] = {"hypothesis": name, fs.parameter: x,
@@ -2076,22 +2076,28 @@ def _adopt_full_parameters(rep: Report, best: dict[str, Any], fs: catalogue.Full
 
 #: searched parameter -> (derived name, unit, function, what it is): quantities a user compares
 #: with another code or a measurement. The restitution searched is the nominal one of crashdem's
-#: dashpot (Yade's betan convention), whose contact never pulls; a head-on contact of it
-#: rebounds faster (``soil.Material.rebound_restitution``), and a code whose dashpot may pull
-#: has nominal = rebound
-DERIVED: dict[str, tuple[str, str, Any, str]] = {
-    "restitution": ("rebound_restitution", "1", rebound_restitution,
-                    "the rebound ratio of a head-on grain contact at this nominal restitution "
-                    "(crashdem's contact force never pulls, so it opens early; in a code whose "
-                    "dashpot may pull, nominal and rebound restitution are the same)"),
+#: dashpot (Yade's betan convention); in its ``no_tension`` form the contact never pulls and a
+#: head-on contact of it rebounds faster (``soil.Material.rebound_restitution``), in its
+#: ``tension`` form (``catalogue.DAMPING_FORMS``) the dashpot pulls and nominal = rebound.
+#: Keyed by parameter and the search's form (None: any form)
+DERIVED: dict[tuple[str, str | None], tuple[str, str, Any, str]] = {
+    ("restitution", None): (
+        "rebound_restitution", "1", rebound_restitution,
+        "the rebound ratio of a head-on grain contact at this nominal restitution (crashdem's "
+        "contact force never pulls, so it opens early; in a code whose dashpot may pull, "
+        "nominal and rebound restitution are the same)"),
+    ("restitution", "tension"): (
+        "rebound_restitution", "1", float,
+        "the rebound ratio of a head-on grain contact at this nominal restitution: the same "
+        "value, the dashpot pulls until the contact opens as in Yade's CundallStrackVisco"),
 }
 
 
-def _derived_values(parameter: str, x: float, interval: Mapping[str, Any] | None
-                    ) -> dict[str, Any] | None:
-    """The derived quantity of a named searched value (``DERIVED``) at the value and at the
-    ends of its interval, or None."""
-    d = DERIVED.get(parameter)
+def _derived_values(parameter: str, x: float, interval: Mapping[str, Any] | None,
+                    form: str | None = None) -> dict[str, Any] | None:
+    """The derived quantity of a named searched value (``DERIVED``) in the search's ``form``
+    at the value and at the ends of its interval, or None."""
+    d = DERIVED.get((parameter, form), DERIVED.get((parameter, None)))
     if d is None:
         return None
     key, unit, f, what = d

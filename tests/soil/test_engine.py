@@ -359,6 +359,53 @@ def test_viscous_damping_restitution_and_ledger():
     assert abs(en["balance_error"]) < 5e-3 * ke0
 
 
+@pytest.mark.parametrize("e_target", [0.1, 0.3, 0.5])
+@pytest.mark.parametrize("pair", ["sphere-wall", "sphere-sphere"])
+def test_a_pulling_dashpot_rebounds_at_the_nominal_restitution(pair, e_target):
+    """Oracle: closed form. A linear spring-dashpot whose force may pull until the overlap
+    closes (``Material.dashpot_tension``, Yade ``CundallStrackVisco``) is the damped oscillator
+    integrated from overlap 0 back to overlap 0: the rebound is exactly the nominal e of its
+    damping ratio, below the clamped contact's (the same dashpot with the force held >= 0,
+    ``rebound_restitution``); the dashpot's work is booked in dissipated_viscous (0.5 %). Both
+    contact kernels: a grain on a wall (body contacts) and two grains (pair contacts). The
+    pull ends with a jump (-c v to 0) where the overlap closes, between two steps: the rebound
+    may differ by up to one step of that pull, (c / m*) dt e v0 = 2 zeta omega_n dt e v0, beyond
+    the clamped contact's tolerance."""
+    m0 = mat(0.0, restitution=e_target, dashpot_tension=True)
+    clamped = mat(0.0, restitution=e_target)
+    m = sphere_mass()
+    kn = E * R
+    if pair == "sphere-wall":
+        dt = contact_duration(m, kn) / STEPS_PER_CONTACT
+        p = soil.Particles(x=[[0.0, 0.0, R + 1e-4]], radius=[R], v=[[0.0, 0.0, -1.0]])
+        sim = soil.Simulation(p, [m0], [soil.BoundaryBody(shapes=[soil.Plane()])],
+                              gravity=(0, 0, 0), dt=dt)
+        i_obs, axis, ke0 = 0, 2, 0.5 * m
+    else:
+        dt = contact_duration(0.5 * m, kn) / STEPS_PER_CONTACT
+        p = soil.Particles(x=[[0, 0, 0], [2 * R + 1e-4, 0, 0]], radius=R,
+                           v=[[0.5, 0, 0], [-0.5, 0, 0]])
+        sim = soil.Simulation(p, [m0], gravity=(0, 0, 0), dt=dt)
+        i_obs, axis, ke0 = 1, 0, 2 * 0.5 * m * 0.25
+    dur, vb, va = _impact(sim, i_obs, 10 * STEPS_PER_CONTACT,
+                          lambda s: len(s.contacts()["i"]) > 0)
+    e_dem = -va[axis] / vb[axis]
+    m_eff = m if pair == "sphere-wall" else 0.5 * m
+    last_step = 2 * m0.damping_ratio * math.sqrt(kn / m_eff) * dt * e_target
+    assert abs(e_dem - e_target) < DAMPED_RESTITUTION_TOL + last_step
+    assert m0.rebound_restitution == e_target
+    assert clamped.rebound_restitution > e_target + 0.04
+    en = sim.energy()
+    assert en["dissipated_viscous"] == pytest.approx(ke0 * (1 - e_dem**2), rel=5e-3)
+    assert abs(en["balance_error"]) < 5e-3 * ke0
+
+
+def test_dashpot_tension_must_be_a_bool():
+    """Oracle: parameter contract (field, value and what is allowed in the message)."""
+    with pytest.raises(ValueError, match=re.escape("Material.dashpot_tension=1: must be a bool")):
+        mat(0.0, restitution=0.5, dashpot_tension=1)
+
+
 def _bed_with_big_sphere(skin):
     rng = np.random.default_rng(8)
     h = 2 * R

@@ -15,7 +15,8 @@ measured cold on 2 cores: 456 s for the fixture's 14 cases against 873 s in one 
 The diagnosis is the full method: ROM screening calibrated to (and anchored on) the baseline
 simulation, then ``screen_then_confirm`` with the real DEM (``generator_dem.DemFullSimulator``)
 for the top ``TOP_K`` candidates and the full-model search over the soil effects
-(``catalogue.DROP_FULL_SEARCH``: 24 levels, the 6 interface levels in two forms, plus one
+(``catalogue.DROP_FULL_SEARCH``: 24 levels, the 6 interface and the 4 restitution levels in
+two forms, plus one
 refinement run; the 12 floor and interface levels each on 5 beds, ``confirm.LEVEL_BEDS``), judged against the realisation floor
 of 4 replicate packings of the baseline (``generator_dem.replicates``).
 

@@ -132,7 +132,8 @@ def _scenario_rom_simulator(calls: list, recording=None, same_as_recording=(),
 
 def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     """With the full-model search, the full model also runs each searched effect at each of its
-    levels (``catalogue.DROP_FULL_SEARCH``: 24, 30 runs with the layering in both its forms) and at most one refinement; every level is
+    levels (``catalogue.DROP_FULL_SEARCH``: 24, 34 runs with the layering and the contact
+    damping in both their forms) and at most one refinement; every level is
     reported with its score and Delta BIC (report.json) and each effect's best level in
     report.md, each effect is judged by its best run, and the concealed layering is named (its
     interface 0.15-0.5 m levels bracket the truth)."""
@@ -144,7 +145,7 @@ def test_full_search_runs_every_level_of_every_effect(layering_case, tmp_path):
     top_k = 2
     rep = screen_then_confirm(simulate(RomParams()), layering_case.recording, full, top_k=top_k)
     n_levels = sum(fs.n_levels for fs in DROP.full_search.values())
-    assert n_levels == 30
+    assert n_levels == 34
     # the numerics check runs the named effect's levels twice when a search level stands for it
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * len(DROP.full_search["soil_layering"].values)
@@ -404,7 +405,7 @@ def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering
 
     n_layering = len(DROP.full_search["soil_layering"].values)
     n_levels = sum(fs.n_levels for fs in DROP.full_search.values())
-    assert n_levels == 30
+    assert n_levels == 34
     n_num = rep.simulations.get("numerics_simulations", 0)
     assert n_num == (2 * (1 + n_layering) if rep.fit["full_search"].get("named") else 0)
     n_ext = sum(lv.get("beds", 1) for lv in rep.fit["full_search"]["levels"] if lv["extension"])
@@ -1571,6 +1572,17 @@ def test_a_named_restitution_reports_its_rebound_restitution():
                      restitution=v).rebound_restitution for v in (lo, hi)]
     assert der["interval"] == pytest.approx(want, rel=1e-12) and want[0] < der["value"] < want[1]
     assert rep.hypotheses[0]["full_model"]["derived"] == der
+    # in the search's no-tension form the same; in its tension form (the dashpot pulls, as in
+    # Yade's CundallStrackVisco) the rebound is the nominal restitution itself
+    for form, want_value in (("no_tension", rebound), ("tension", 0.2)):
+        rep.fit = {}
+        _adopt_full_parameters(rep, {**lv[1], "overrides": {"k": 0.2}, "score": 0.9},
+                               fs.with_form(form), lv,
+                               {"delta_bic": 0.0, "score": 0.8, "scatter": 8.0})
+        got = rep.fit["full_search"]["named"]
+        assert got["form"] == form
+        assert got["derived"]["value"] == pytest.approx(want_value, rel=1e-12)
+    assert got["derived"]["interval"] == pytest.approx([lo, hi], rel=1e-12)
     # a floor depth derives nothing
     floor = DROP_FULL_SEARCH["boundary_proximity"]
     fl = [{"hypothesis": "boundary_proximity", "search_value": v, "delta_bic_vs_reference": d}
