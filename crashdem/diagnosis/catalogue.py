@@ -528,10 +528,11 @@ LAYER_FORMS: tuple[tuple[str, dict[str, Any]], ...] = (
 #: the two forms of contact damping the drop search runs (``FullSearch.forms``): the normal
 #: dashpot whose contact force never pulls (crashdem's default: a contact opens early, the
 #: rebound is above the restitution) and the dashpot that may pull while the contact opens
-#: (Yade's ``CundallStrackVisco``, and many codes: the rebound is the restitution). The pull
-#: holds the impactor and the grains back as they separate, so a recording made with it reads
-#: as cohesion to a model without it: on the 13.7 m Yade recordings (command line) four of six
-#: damping recordings were named cohesion at its strongest level with the first form alone
+#: (Yade's ``CundallStrackVisco``, and many codes: the rebound is the restitution). Measured
+#: on the Yade damping recordings (session 45): the two forms' best runs fit within 1.6 Delta
+#: BIC of each other, inside the replicates' scatter, so the drop test does not resolve the form;
+#: the 13.7 m damping recordings named cohesion stay so with the pull (it is the model's grain
+#: size: at the truths' 0.10 m grains they are named damping)
 DAMPING_FORMS: tuple[tuple[str, dict[str, Any]], ...] = (
     ("no_tension", {"physics.contact_damping.tension": False}),
     ("tension", {"physics.contact_damping.tension": True}),

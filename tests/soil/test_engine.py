@@ -375,14 +375,14 @@ def test_a_pulling_dashpot_rebounds_at_the_nominal_restitution(pair, e_target):
     clamped = mat(0.0, restitution=e_target)
     m = sphere_mass()
     kn = E * R
+    m_eff = m if pair == "sphere-wall" else 0.5 * m
+    dt = contact_duration(m_eff, kn) / STEPS_PER_CONTACT
     if pair == "sphere-wall":
-        dt = contact_duration(m, kn) / STEPS_PER_CONTACT
         p = soil.Particles(x=[[0.0, 0.0, R + 1e-4]], radius=[R], v=[[0.0, 0.0, -1.0]])
         sim = soil.Simulation(p, [m0], [soil.BoundaryBody(shapes=[soil.Plane()])],
                               gravity=(0, 0, 0), dt=dt)
         i_obs, axis, ke0 = 0, 2, 0.5 * m
     else:
-        dt = contact_duration(0.5 * m, kn) / STEPS_PER_CONTACT
         p = soil.Particles(x=[[0, 0, 0], [2 * R + 1e-4, 0, 0]], radius=R,
                            v=[[0.5, 0, 0], [-0.5, 0, 0]])
         sim = soil.Simulation(p, [m0], gravity=(0, 0, 0), dt=dt)
@@ -390,7 +390,6 @@ def test_a_pulling_dashpot_rebounds_at_the_nominal_restitution(pair, e_target):
     dur, vb, va = _impact(sim, i_obs, 10 * STEPS_PER_CONTACT,
                           lambda s: len(s.contacts()["i"]) > 0)
     e_dem = -va[axis] / vb[axis]
-    m_eff = m if pair == "sphere-wall" else 0.5 * m
     last_step = 2 * m0.damping_ratio * math.sqrt(kn / m_eff) * dt * e_target
     assert abs(e_dem - e_target) < DAMPED_RESTITUTION_TOL + last_step
     assert m0.rebound_restitution == e_target
