@@ -31,6 +31,10 @@ from soil.contact_laws import (
     spring_dissipation,
 )
 
+#: digest of the jitted sources compiled into these kernels (Numba's disk cache is per file;
+#: tests/test_numba_cache_deps.py names the new value when one of them changes)
+NUMBA_CACHE_DEPENDS = "a5ca02d81124c25a"
+
 jit = functools.partial(numba.njit, cache=True)
 
 

@@ -5,8 +5,9 @@ motions and triangle meshes); this loop runs them without returning to Python an
 bits.
 
 Numba's on-disk cache is invalidated per source file only: the compiled functions here inline
-``_kernels``'s, so a change of a kernel this loop calls must come with a change of this file
-(e.g. this list). Kernels changed since: the normal dashpot that may pull (``M_TENSION``).
+``_kernels``'s, so a change of a kernel this loop calls must change this file too.
+``NUMBA_CACHE_DEPENDS`` is the digest of those sources; tests/test_numba_cache_deps.py fails
+until it is renewed.
 """
 
 from __future__ import annotations
@@ -17,6 +18,9 @@ import numba
 import numpy as np
 
 from soil import _kernels as K
+
+#: digest of the jitted sources compiled in (see the module docstring)
+NUMBA_CACHE_DEPENDS = "a67075dfbd52c25c"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel
