@@ -245,6 +245,11 @@ def build_parser() -> argparse.ArgumentParser:
                         "grain radius times each factor (its own baseline, replicates and "
                         "search) and name the effect only if those name it too, see "
                         "--grain-check-agree (default off; e.g. 1.1,0.9)")
+    d.add_argument("--grain-fit", default=None, metavar="F[,F...]|off",
+                   help="run the baseline and its replicate packings with the grain radius "
+                        "times each factor; when one grain size fits the recording decisively "
+                        "better than the scenario's, make the whole confirmation at it "
+                        "(default off; e.g. 0.8,1.25,1.5)")
     d.add_argument("--grain-check-agree", default=None, choices=("all", "any"),
                    help="how many of the --grain-check factors must name the effect: all "
                         "(default) or any (at least one)")

@@ -401,16 +401,17 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
         grain = _grain_scales(getattr(args, "grain_check", None))
+        gfit = _grain_fit_scales(getattr(args, "grain_fit", None))
         level_beds = _level_beds(getattr(args, "level_beds", None))
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:
-            reps, numerics, grain, level_beds = [], (), (), 1
+            reps, numerics, grain, gfit, level_beds = [], (), (), (), 1
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
                                   numerics=numerics, level_beds=level_beds,
-                                  grain_check=grain,
+                                  grain_check=grain, grain_fit=gfit,
                                   grain_agree=getattr(args, "grain_check_agree", None)
                                   or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
@@ -482,7 +483,8 @@ def _one_bed(scen, search_sim, args) -> dict[str, Any] | None:
                              f"seed repeats; allowed: {none[1]} (or leave it out)")
     for opt, val, parse in (("--numerics-check", getattr(args, "numerics_check", None),
                              _numerics_scales),
-                            ("--grain-check", getattr(args, "grain_check", None), _grain_scales)):
+                            ("--grain-check", getattr(args, "grain_check", None), _grain_scales),
+                            ("--grain-fit", getattr(args, "grain_fit", None), _grain_fit_scales)):
         if val is not None and parse(val):
             raise ValueError(f"{opt}={val!r}: the scenario's bed is imported ({field}), whose "
                              "grain radii a radius factor does not change; allowed: off (or "
@@ -521,6 +523,15 @@ def _grain_scales(text: str | None) -> tuple[float, ...]:
     from crashdem.diagnosis.confirm import GRAIN_CHECK_SCALES
 
     return _radius_factors(text, "--grain-check", GRAIN_CHECK_SCALES)
+
+
+def _grain_fit_scales(text: str | None) -> tuple[float, ...]:
+    """``--grain-fit``: the grain-radius factors at which the baseline's realisations are run
+    to find the grain size that fits the recording (default ``confirm.GRAIN_FIT_SCALES``;
+    ``off`` = none)."""
+    from crashdem.diagnosis.confirm import GRAIN_FIT_SCALES
+
+    return _radius_factors(text, "--grain-fit", GRAIN_FIT_SCALES)
 
 
 def _radius_factors(text: str | None, opt: str, default: Sequence[float]

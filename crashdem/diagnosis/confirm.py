@@ -97,6 +97,18 @@ GRAIN_CHECK_SCALES: tuple[float, ...] = ()
 #: with the model's own grains, two of three grain sizes)
 GRAIN_CHECK_AGREE = "all"
 
+#: the grain fit (``screen_then_confirm(..., grain_fit=...)``, CLI ``--grain-fit``): the
+#: baseline and its replicate packings run again with the grain radius times each factor, and
+#: when one grain size fits the recording decisively better than the model's own
+#: (``GRAIN_FIT_MARGIN``), the whole confirmation is made at that grain size. The grain size
+#: of a coarse-grained DEM soil is a numerics choice that the recording's soil does not fix,
+#: and another code's recording answers differently at different grain sizes (measured on
+#: Yade at 13.7 m, docs/diagnosis.md "The grain fit"). Off by default (``()``)
+GRAIN_FIT_SCALES: tuple[float, ...] = ()
+#: how much lower (BIC, mean over the baseline's realisations) another grain size must fit the
+#: recording than the model's own grains for the grain fit to move to it
+GRAIN_FIT_MARGIN = 6.0
+
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
 #: packing seed and the first ``LEVEL_BEDS - 1`` replicate seeds, each taken as its change
@@ -133,6 +145,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         level_beds: int | None = None,
                         grain_check: Sequence[float] = GRAIN_CHECK_SCALES,
                         grain_agree: str = GRAIN_CHECK_AGREE,
+                        grain_fit: Sequence[float] = GRAIN_FIT_SCALES,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -191,6 +204,17 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         The factors run in turn, and only while the answer is open. ``fit.grain_check``
         records each factor's answer and runs
     grain_agree : "all" or "any", see ``grain_check``
+    grain_fit : grain-radius factors of the grain fit (``GRAIN_FIT_SCALES``; ``()`` skips
+        it): unless the answer is model-free or the recording is at another filter class, the
+        baseline and its replicates (the realisations of the realisation floor, on the
+        simulator the search ran on, anchored as its runs are) run again at each factor, and
+        each grain size is rated by the mean BIC of its realisations against the recording.
+        When the best beats the model's own grains by ``GRAIN_FIT_MARGIN``, the confirmation
+        is made again with every run at that grain size (as one factor of the grain check)
+        and its answer is the report's; the grain radius is then part of the recalibration
+        (``fit.grain_fit``: each size's BIC, the size chosen, the answer at the model's
+        grains and the baseline's score there; ``fit.before`` stays the scenario's own
+        baseline). The grain check then scales from the chosen grain size
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -223,6 +247,29 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     p = _confirm_pass(baseline_signals, recording_signals, full_simulator, search_simulator,
                       top_k=top_k, full_search=full_search, replicates=replicates,
                       level_beds=level_beds, numerics=numerics, **diagnose_kw)
+    fitted = None
+    if grain_fit and not p.c.model_free and not p.c.cfc_key:
+        fitted = _grain_fit(p, grain_fit, replicates)
+        if fitted["chosen"] != 1.0:
+            f = fitted["chosen"]
+            full_simulator = _GrainScaled(full_simulator, f)
+            if search_simulator is not None:
+                search_simulator = _GrainScaled(search_simulator, f)
+            kw = {k: v for k, v in diagnose_kw.items() if k != "baseline_raw"}
+            at_model = p
+            p = _confirm_pass(full_simulator({}), recording_signals, full_simulator,
+                              search_simulator, top_k=top_k, full_search=full_search,
+                              replicates=replicates, level_beds=level_beds, numerics=numerics,
+                              **kw)
+            fitted["at_model_grains"] = {
+                "named": at_model.d.confirmed,
+                "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
+                "before": at_model.rep.fit["before"],
+                "full_simulations": at_model.rep.simulations.get("full_simulations")}
+            fitted["runs"] += full_simulator.n + (search_simulator.n if search_simulator
+                                                  is not None else 0)
+            p.rep.fit["before_at_grain_fit"] = p.rep.fit["before"]
+            p.rep.fit["before"] = at_model.rep.fit["before"]
     rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
     answers: dict[float, dict[str, Any]] = {}
 
@@ -252,7 +299,63 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if answers:
         rep.fit["grain_check"] = {"agree": grain_agree, "factors": list(answers.values())}
         rep.simulations["grain_check_simulations"] = sum(g["runs"] for g in answers.values())
+    if fitted is not None:
+        rep.fit["grain_fit"] = fitted
+        rep.simulations["grain_fit_simulations"] = fitted["runs"]
+        if fitted["chosen"] != 1.0:  # the grain size taken is a recalibration of the model's
+            for h in rep.hypotheses:
+                if h["name"] == RECALIBRATION.name:
+                    h["grain_radius_scale"] = fitted["chosen"]
     return rep
+
+
+def _grain_fit(p: _Pass, factors: Sequence[float],
+               replicates: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The grain fit of ``screen_then_confirm``: the baseline's realisations (its own packing
+    and the replicates) at each grain-radius factor, on the simulator the search ran on
+    (anchored on the baseline simulation through that simulator's own baseline run at the
+    model's grains when it is a separate tier), each rated by its BIC against the recording
+    (``_Confirmation.bic`` of its weighted residual, no parameter); the factor whose mean is
+    lowest -- or, of those within ``GRAIN_FIT_MARGIN`` of it, the one nearest the model's
+    grains -- when it beats the model's own grains (1) by ``GRAIN_FIT_MARGIN``. At factor 1
+    the first realisation is the baseline simulation itself."""
+    c = p.c
+    sim = p.search_sim
+    anchor = p.tier.rows[0] if p.tier is not None else None
+    reals: list[dict[str, Any]] = [{}, *[dict(r) for r in replicates]]
+    sizes: list[dict[str, Any]] = []
+    runs = 0
+    for f in (1.0, *[float(x) for x in factors if float(x) != 1.0]):
+        scaled = _GrainScaled(sim, f)
+        todo = reals if (f != 1.0 or anchor is not None) else reals[1:]
+        outs = _run_full(scaled, [(REPLICATE, ov) for ov in todo])
+        runs += scaled.n
+        rows = [c.row(REPLICATE, ov, None, o) for ov, o in zip(todo, outs)]
+        if anchor is not None:
+            rows = [c.anchored(r, anchor) for r in rows]
+        bics = [c.bic(r["rss"], 0) for r in rows if "rss" in r]
+        scores = [r["score"] for r in rows if "rss" in r]
+        if f == 1.0 and anchor is None:
+            bics.insert(0, c.bic(_full_rss(c.rep, c.rep.baseline), 0))
+            scores.insert(0, float(c.rep.fit["before"]["overall"]))
+        if not bics:
+            continue
+        sizes.append({"radius_scale": f, "bic_mean": float(np.mean(bics)),
+                      "bic_sd": float(np.std(bics, ddof=1)) if len(bics) > 1 else None,
+                      "score_mean": float(np.mean(scores)), "realisations": len(bics)})
+    own = next((s for s in sizes if s["radius_scale"] == 1.0), None)
+    chosen = 1.0
+    if own is not None:
+        best = min(s["bic_mean"] for s in sizes)
+        # decisively better than the model's grains, and as good as the best within the
+        # margin: the one nearest the model's grains (the realisation means scatter by a few
+        # Delta BIC between neighbouring grain sizes; moving further is not supported)
+        near = [s for s in sizes if own["bic_mean"] - s["bic_mean"] > GRAIN_FIT_MARGIN
+                and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
+        if near:
+            chosen = min(near, key=lambda s: abs(math.log(s["radius_scale"])))["radius_scale"]
+    return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "chosen": chosen, "runs": runs,
+            "simulator": "search tier (anchored)" if anchor is not None else "full"}
 
 
 @dataclass
@@ -326,6 +429,8 @@ class _GrainScaled:
         self.sim, self.factor, self.n = sim, float(factor), 0
 
     def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
+        if self.factor == 1.0:  # the model's own grains: the very runs (and run-cache keys)
+            return dict(overrides)
         return {**overrides,
                 RADIUS_SCALE_KEY: self.factor * float(overrides.get(RADIUS_SCALE_KEY, 1.0))}
 

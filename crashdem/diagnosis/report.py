@@ -282,6 +282,26 @@ def to_markdown(report, plots: list[str] | None = None,
         if search.get("verdicts"):
             lines += ["", "| effect (search tier) | promotion to a full run |", "|---|---|"]
             lines += [f"| {n} | {v} |" for n, v in search["verdicts"].items()]
+    gfit = fit.get("grain_fit")
+    if gfit and gfit.get("sizes"):
+        at = gfit.get("at_model_grains")
+        lines += ["", f"Grain fit ({gfit['runs']} runs): the baseline's realisations with the "
+                  f"grain radius scaled, each size rated by the mean BIC of its realisations "
+                  f"against the recording; another size is taken when it beats the model's "
+                  f"grains by {gfit['margin_bic']:g} (of those within that of the best, the "
+                  f"nearest). "
+                  + (f"Taken: x{gfit['chosen']:g}; the confirmation above is made with every run "
+                     f"at it (the grain radius is part of the recalibration). At the model's "
+                     f"grains it named "
+                     + (at['named'] if at and at.get('named') else "nothing") + "."
+                     if gfit["chosen"] != 1.0 else "The model's grains stand."),
+                  "", "| grain radius | mean BIC | sd | mean score | realisations |",
+                  "|---|---|---|---|---|"]
+        for g in gfit["sizes"]:
+            sd = g.get("bic_sd")
+            lines.append(f"| x{g['radius_scale']:g} | {g['bic_mean']:.1f} | "
+                         f"{'-' if sd is None else f'{sd:.1f}'} | {_fmt(g['score_mean'])} | "
+                         f"{g['realisations']} |")
     real = fit.get("realisation")
     if real and real.get("runs"):
         lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "

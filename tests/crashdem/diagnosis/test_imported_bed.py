@@ -104,7 +104,8 @@ def test_an_imported_bed_refuses_options_that_repeat_it(tmp_path):
 
     def args(**kw):
         return SimpleNamespace(**{"replicates": None, "level_beds": None,
-                                  "numerics_check": None, "grain_check": None, **kw})
+                                  "numerics_check": None, "grain_check": None,
+                                  "grain_fit": None, **kw})
 
     one = _one_bed(scen, None, args())
     assert one["grains"] == 2 and one["replicates"] == 0 and one["numerics_check"] == "off"
@@ -112,7 +113,8 @@ def test_an_imported_bed_refuses_options_that_repeat_it(tmp_path):
     assert _one_bed(scen, object(), args(replicates=4)) is None  # a deposited search tier
     for kw, opt in (({"replicates": 4}, "--replicates"), ({"level_beds": 5}, "--level-beds"),
                     ({"numerics_check": "0.9,1.1"}, "--numerics-check"),
-                    ({"grain_check": "1.1"}, "--grain-check")):
+                    ({"grain_check": "1.1"}, "--grain-check"),
+                    ({"grain_fit": "1.25"}, "--grain-fit")):
         with pytest.raises(ValueError, match=f"{opt}=.*soil.packing_file"):
             _one_bed(scen, None, args(**kw))
     deposited = sc.load(gd.scenario_path(), dict(gd.BASE_OVERRIDES))

@@ -388,6 +388,77 @@ def test_grain_check_names_only_what_every_grain_size_names(tmp_path):
     assert all(round(c.get(RADIUS_SCALE_KEY, 1.0), 9) in (0.9, 1.0, 1.1) for c in calls)
 
 
+def test_grain_fit_confirms_at_the_grain_size_that_fits_the_recording():
+    """The grain fit rates the baseline at other grain sizes and, when one fits the recording
+    decisively better, makes the confirmation there. The stand-in: grains 1.2 x the model's
+    or more respond as a layer at 0.33 m does at the model's grains (another code's coarser
+    soil). A null recording from 1.25 x grains is then claimed a layering at the model's
+    grains; with the grain fit (1.25 x) that grain size fits it far better (the recording is
+    its run plus noise), the confirmation there names nothing, and the report keeps the
+    answer at the model's grains, the scenario's own baseline score as ``before`` and the
+    runs. Control: a floor recorded at the model's grains, which 1.25 x fits worse: the grain
+    size stays the model's, one more run, the floor still named."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.confirm import GRAIN_FIT_MARGIN, GRAIN_FIT_SCALES
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
+    from crashdem.diagnosis.report import to_markdown
+
+    fs = {k: DROP.full_search[k] for k in ("soil_layering", "boundary_proximity")}
+    layer = fs["soil_layering"].overrides(0.33)
+    calls: list = []
+    rom = _scenario_rom_simulator(calls)
+
+    def coarse_reads_as_layer(overrides):
+        ov = dict(overrides)
+        if (float(ov.get(RADIUS_SCALE_KEY, 1.0)) >= 1.2
+                and not any(k.startswith("physics.soil_layering.") for k in ov)):
+            ov.update(layer)
+        return rom(ov)
+
+    def recording(ov):
+        p = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(ov))
+        return acquire(p, np.random.default_rng(5))
+
+    def run(rec, grain_fit):
+        calls.clear()
+        return screen_then_confirm(simulate(RomParams()), rec, coarse_reads_as_layer, top_k=0,
+                                   full_search=fs, grain_fit=grain_fit)
+
+    null = recording(layer)
+    claimed = run(null, GRAIN_FIT_SCALES)
+    assert GRAIN_FIT_SCALES == ()
+    assert claimed.missing_physics == "soil_layering", claimed.decision
+    assert "grain_fit" not in claimed.fit and "grain_fit_simulations" not in claimed.simulations
+
+    fitted = run(null, (1.25,))
+    g = fitted.fit["grain_fit"]
+    sizes = {s["radius_scale"]: s["bic_mean"] for s in g["sizes"]}
+    assert set(sizes) == {1.0, 1.25} and sizes[1.0] - sizes[1.25] > GRAIN_FIT_MARGIN
+    assert g["chosen"] == 1.25
+    assert fitted.missing_physics is None, fitted.decision
+    assert g["at_model_grains"]["named"] == "soil_layering"
+    assert fitted.fit["before"] == claimed.fit["before"]
+    assert fitted.fit["before_at_grain_fit"]["overall"] > fitted.fit["before"]["overall"]
+    # its runs: at 1.25 x (the numerics check at the model's grains runs at 0.9 and 1.1 x)
+    scaled = [c for c in calls if round(c.get(RADIUS_SCALE_KEY, 1.0), 9) not in (0.9, 1.0, 1.1)]
+    assert fitted.simulations["grain_fit_simulations"] == g["runs"] == len(scaled) > 1
+    assert "Taken: x1.25" in to_markdown(fitted)
+    (recal,) = [h for h in fitted.hypotheses if h["name"] == "recalibration"]
+    assert recal["grain_radius_scale"] == 1.25
+
+    floor_rec = recording(fs["boundary_proximity"].overrides(0.9))
+    floor = run(floor_rec, (1.25,))
+    g = floor.fit["grain_fit"]
+    assert g["chosen"] == 1.0 and g["runs"] == 1 and "at_model_grains" not in g
+    sizes = {s["radius_scale"]: s["bic_mean"] for s in g["sizes"]}
+    assert sizes[1.25] > sizes[1.0]
+    assert floor.missing_physics == "boundary_proximity", floor.decision
+    assert "before_at_grain_fit" not in floor.fit
+    assert "The model's grains stand." in to_markdown(floor)
+
+
 def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
     """With a separate (cheaper) search simulator the levels run there (plus its baseline run
     and at most one refinement) and only the leading effects' best levels reach the full
