@@ -268,8 +268,9 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                 "full_simulations": at_model.rep.simulations.get("full_simulations")}
             fitted["runs"] += full_simulator.n + (search_simulator.n if search_simulator
                                                   is not None else 0)
-            p.rep.fit["before_at_grain_fit"] = p.rep.fit["before"]
-            p.rep.fit["before"] = at_model.rep.fit["before"]
+            for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
+                p.rep.fit[f"{key}_at_grain_fit"] = p.rep.fit[key]
+                p.rep.fit[key] = at_model.rep.fit[key]
     rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
     answers: dict[float, dict[str, Any]] = {}
 

@@ -441,6 +441,9 @@ def test_grain_fit_confirms_at_the_grain_size_that_fits_the_recording():
     assert g["at_model_grains"]["named"] == "soil_layering"
     assert fitted.fit["before"] == claimed.fit["before"]
     assert fitted.fit["before_at_grain_fit"]["overall"] > fitted.fit["before"]["overall"]
+    assert fitted.fit["residual_rms_sigma_before"] == claimed.fit["residual_rms_sigma_before"]
+    assert fitted.fit["residual_rms_sigma_before_at_grain_fit"] < \
+        fitted.fit["residual_rms_sigma_before"]
     # its runs: at 1.25 x (the numerics check at the model's grains runs at 0.9 and 1.1 x)
     scaled = [c for c in calls if round(c.get(RADIUS_SCALE_KEY, 1.0), 9) not in (0.9, 1.0, 1.1)]
     assert fitted.simulations["grain_fit_simulations"] == g["runs"] == len(scaled) > 1
