@@ -252,22 +252,18 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         fitted = _grain_fit(p, grain_fit, replicates)
         if fitted["chosen"] != 1.0:
             f = fitted["chosen"]
-            full_simulator = _GrainScaled(full_simulator, f)
-            if search_simulator is not None:
-                search_simulator = _GrainScaled(search_simulator, f)
-            kw = {k: v for k, v in diagnose_kw.items() if k != "baseline_raw"}
             at_model = p
-            p = _confirm_pass(full_simulator({}), recording_signals, full_simulator,
-                              search_simulator, top_k=top_k, full_search=full_search,
-                              replicates=replicates, level_beds=level_beds, numerics=numerics,
-                              **kw)
+            # the grain check below scales from the grain size taken
+            p, full_simulator, search_simulator = _scaled_pass(
+                f, recording_signals, full_simulator, search_simulator, top_k=top_k,
+                full_search=full_search, replicates=replicates, level_beds=level_beds,
+                numerics=numerics, **diagnose_kw)
             fitted["at_model_grains"] = {
                 "named": at_model.d.confirmed,
                 "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
                 "before": at_model.rep.fit["before"],
                 "full_simulations": at_model.rep.simulations.get("full_simulations")}
-            fitted["runs"] += full_simulator.n + (search_simulator.n if search_simulator
-                                                  is not None else 0)
+            fitted["runs"] += _runs_made(full_simulator, search_simulator)
             for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
                 p.rep.fit[f"{key}_at_grain_fit"] = p.rep.fit[key]
                 p.rep.fit[key] = at_model.rep.fit[key]
@@ -457,16 +453,32 @@ def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],
     many runs it made. The baseline's raw channels are not passed on (the check is not made
     with the recording at another filter class, ``_Confirmation.grain_checked``)."""
     t0 = time.perf_counter()
-    full = _GrainScaled(full_simulator, factor)
-    search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
-    kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
-    d = _confirm_pass(full({}), recording_signals, full, search, **kw).d
+    p, full, search = _scaled_pass(factor, recording_signals, full_simulator,
+                                   search_simulator, **confirm_kw)
+    d = p.d
     return {"radius_scale": factor, "named": d.confirmed,
             "ambiguous": list(d.ambiguous) if d.ambiguous else None,
             "value": d.best.get("search_value") if d.confirmed else None,
             "score": d.best.get("score") if d.confirmed else None,
-            "runs": full.n + (search.n if search is not None else 0),
-            "wall_time_s": time.perf_counter() - t0}
+            "runs": _runs_made(full, search), "wall_time_s": time.perf_counter() - t0}
+
+
+def _scaled_pass(factor: float, recording_signals: Mapping[str, Signal],
+                 full_simulator: Simulator, search_simulator: Simulator | None,
+                 **confirm_kw) -> tuple[_Pass, _GrainScaled, _GrainScaled | None]:
+    """The confirmation made again with every run's grain radius times ``factor``, its
+    baseline run first (the grain check's factor, the grain fit's size): the pass and its
+    scaled full and search simulators. The baseline's raw channels are not passed on
+    (neither is made with the recording at another filter class)."""
+    full = _GrainScaled(full_simulator, factor)
+    search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
+    kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
+    return _confirm_pass(full({}), recording_signals, full, search, **kw), full, search
+
+
+def _runs_made(full: _GrainScaled, search: _GrainScaled | None) -> int:
+    """The runs the scaled simulators of ``_scaled_pass`` have made."""
+    return full.n + (search.n if search is not None else 0)
 
 
 def _grain_verdict(grain: Sequence[Mapping[str, Any]], agree: str) -> str:
