@@ -405,13 +405,20 @@ def packing_cache(root: str | os.PathLike | None = None) -> Path:
 def share_packings(run_dir: str | os.PathLike, cache: str | os.PathLike) -> None:
     """Let the runs written to ``run_dir`` reuse (and add to) the deposited beds in ``cache``:
     ``run_scenario`` caches its packings in ``<out_dir>/packings``, which becomes a link to
-    ``cache`` (both directories are created) unless it exists already. On a file system
-    without symbolic links nothing is linked and the runs deposit their own beds."""
+    ``cache`` (both directories are created) unless it exists already. A link to another
+    directory (say the engine-keyed cache of an earlier soil engine, ``packing_cache``, left in
+    a reused output directory) is pointed at ``cache`` again; a real directory is kept. On a
+    file system without symbolic links nothing is linked and the runs deposit their own beds."""
     run_dir, cache = Path(run_dir), Path(cache)
     link = run_dir / "packings"
-    if link.exists() or link.is_symlink():
-        return
     try:
+        if link.is_symlink():
+            cache.mkdir(parents=True, exist_ok=True)
+            if link.resolve() == cache.resolve():
+                return
+            link.unlink()
+        elif link.exists():
+            return
         run_dir.mkdir(parents=True, exist_ok=True)
         cache.mkdir(parents=True, exist_ok=True)
         link.symlink_to(cache.resolve(), target_is_directory=True)

@@ -415,6 +415,8 @@ def table(runs: list[dict]) -> str:
 
 
 def main(argv=None) -> int:
+    from crashdem.run import packing_cache  # the beds of this soil engine under --cache
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sizes", default="50000", help="comma-separated particle counts")
     ap.add_argument("--threads", default="1,2", help="comma-separated thread counts")
@@ -422,7 +424,8 @@ def main(argv=None) -> int:
     ap.add_argument("--no-yade", action="store_true", help="skip Yade even if on PATH")
     ap.add_argument("--yade-steps", default=None,
                     help="cap Yade's steps per size, e.g. '200000:120' (rate only at that size)")
-    ap.add_argument("--cache", default=str(DEFAULT_CACHE / "packings"), help="packing cache dir")
+    ap.add_argument("--cache", default=str(DEFAULT_CACHE / "packings"),
+                    help="packing cache root (beds under <root>/<soil engine fingerprint>)")
     ap.add_argument("--keep", default=None, help="directory to keep the run files in")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
@@ -444,7 +447,7 @@ def main(argv=None) -> int:
         yade_steps[int(size)] = int(k)
     runs = []
     for n in sizes:
-        runs += bench_size(n, threads, Path(a.cache).expanduser(), work, use_yade, log,
+        runs += bench_size(n, threads, packing_cache(a.cache), work, use_yade, log,
                            yade_steps.get(n))
     print(table(runs))
     if not a.keep:

@@ -32,6 +32,8 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent
 SCENARIO = ROOT / "scenarios" / "glider_real.toml"
+#: the root of the deposited beds; the runs share its directory of this soil engine
+#: (``crashdem.run.packing_cache``), so another engine's bed is never offered to this one
 CACHE = Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem")) / "packings"
 #: the small resolution of validation/glider_crash.py (MODES["small"])
 SMALL = {"soil.radius": 0.1, "soil.radius_spread": 0.1, "output.snapshots": 0,
@@ -72,10 +74,10 @@ def truth_recording(name: str, overrides: dict, out: Path, seed: int,
     from crashdem.diagnosis.generator import TRIGGER_JITTER, acquire_samples
     from crashdem.diagnosis.generator_planar import RAW_NOISE_PLANAR
     from crashdem.results import open_result
-    from crashdem.run import run_scenario, share_packings
+    from crashdem.run import packing_cache, run_scenario, share_packings
 
     runs = out / "truth_runs"
-    share_packings(runs, CACHE)
+    share_packings(runs, packing_cache(CACHE))
     num = TRUTH_NUMERICS if numerics is None else numerics
     scen = sc.load(SCENARIO, {**SMALL, **num, **overrides,
                               "scenario.name": f"glider_truth_{name}"})
@@ -110,12 +112,12 @@ def main(argv: list[str] | None = None) -> int:
             ap.error(f"--cases: {c!r} unknown; known: {list(CASES)}")
     from crashdem import cli
     from crashdem import scenario as sc
-    from crashdem.run import run_scenario, share_packings
+    from crashdem.run import packing_cache, run_scenario, share_packings
 
     out = Path(args.out).resolve()
     t0 = time.perf_counter()
     base_dir = out / "baseline_run"
-    share_packings(base_dir, CACHE)
+    share_packings(base_dir, packing_cache(CACHE))
     base_ov = {**SMALL, "output.directory": str(base_dir), "scenario.name": "glider_small"}
     base_path = base_dir / "glider_small.h5"
     if not base_path.exists():

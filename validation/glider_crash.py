@@ -160,6 +160,8 @@ def run_one(overrides: dict, out_dir: Path, cache: Path, tag: str) -> dict:
     import shutil
 
     pk_name = f"packing-{rn.packing_spec(scen).hash()[:20]}.h5"
+    # the shared cache is keyed by the soil engine: another engine's bed is never copied in
+    cache = rn.packing_cache(cache)
     local = Path(out_dir) / "packings"
     local.mkdir(parents=True, exist_ok=True)
     if (Path(cache) / pk_name).exists() and not (local / pk_name).exists():

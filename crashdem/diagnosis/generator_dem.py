@@ -161,6 +161,16 @@ def cache_dir() -> Path:
     return Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem"))
 
 
+def packings_dir(cache: Path | None = None) -> Path:
+    """The deposited beds of the runs made here: ``<cache root>/packings/<soil engine
+    fingerprint>`` (``crashdem.run.packing_cache``), so a bed another version of the soil
+    engine deposited in the same root (a cache kept across upgrades) is never offered to this
+    one."""
+    from crashdem.run import packing_cache
+
+    return packing_cache(Path(cache or cache_dir()) / "packings")
+
+
 def _draw(lo: float, hi: float, scale: str, rng: np.random.Generator) -> float:
     u = rng.uniform()
     return math.exp(math.log(lo) + u * (math.log(hi) - math.log(lo))) if scale == "log" \
@@ -352,7 +362,7 @@ def run_dem(overrides: dict[str, Any], *, filtered: bool, cache: Path | None = N
     # validation processes); the cache entry below is written atomically
     runs = store / "runs" / f"pid{os.getpid()}"
     runs.mkdir(parents=True, exist_ok=True)
-    share_packings(runs, root / "packings")
+    share_packings(runs, packings_dir(root))
     ov["scenario.name"] = f"diag_{key}"
     scen = sc.load(SCENARIO, ov)
     # the result file goes to the run cache (``crashdem.runcache``): the raw and the filtered

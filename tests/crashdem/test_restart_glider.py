@@ -28,14 +28,14 @@ from crashdem import checkpoint as ck
 from crashdem import scenario as sc
 from crashdem.glider import BodyWallContact, CompliantWall, PlywoodPanel
 from crashdem.results import open_result
-from crashdem.run import packing_spec, run_scenario
+from crashdem.run import packing_cache, packing_spec, run_scenario
 from restart_checks import assert_results_identical, assert_tree_equal
 from soil import packing as pk
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "validation/scenarios/glider_real.toml"
 #: the packing cache shared with tests/validation/test_glider_crash.py (same 0.1 m slope bed)
-CACHE = Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem")) / "packings"
+CACHE = packing_cache()
 
 #: the glider at the test-suite resolution (0.1 m grains, ~750 in the slope; the bed of
 #: ``validation/glider_crash.py --small``), 1 thread, 0.06 s after the first contact: ~620 DEM

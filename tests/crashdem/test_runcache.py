@@ -330,3 +330,37 @@ def test_the_cache_command_shows_and_prunes(tmp_path, capsys):
     assert "--max-size" in capsys.readouterr().err
     assert main(["cache", "--root", str(tmp_path), "prune", "--older-than", "-2"]) == 2
     assert "--older-than" in capsys.readouterr().err
+
+
+def test_shared_beds_are_those_of_this_soil_engine(tmp_path, monkeypatch):
+    """A run directory or cache root kept across a change of the soil engine never offers the
+    old engine's beds to the new one: ``share_packings`` points a run directory's link at the
+    cache it is given even when an earlier call linked it elsewhere (a real directory is kept),
+    and the diagnosis truths' beds live under the engine's fingerprint
+    (``generator_dem.packings_dir``). Regression: a CI home that kept the previous engine's
+    beds in ``diagnosis_truth/runs/pid<N>/packings`` failed 26 tests on the rebuild warning."""
+    from crashdem.diagnosis import generator_dem as gd
+    from crashdem.run import packing_cache, share_packings
+    from soil.packing import code_fingerprint
+
+    old, new = tmp_path / "packings" / "0123456789abcdef", tmp_path / "packings" / "fedcba9876543210"
+    run = tmp_path / "runs" / "pid1"
+    share_packings(run, old)
+    assert (run / "packings").is_symlink() and (run / "packings").resolve() == old.resolve()
+    (old / "packing-x.h5").write_bytes(b"old engine")
+    share_packings(run, new)  # the engine changed: re-pointed, the old beds left where they are
+    assert (run / "packings").resolve() == new.resolve()
+    assert not (run / "packings" / "packing-x.h5").exists() and (old / "packing-x.h5").exists()
+    share_packings(run, new)  # idempotent
+    assert (run / "packings").resolve() == new.resolve()
+
+    own = tmp_path / "own_run"
+    (own / "packings").mkdir(parents=True)
+    (own / "packings" / "packing-y.h5").write_bytes(b"local")
+    share_packings(own, new)  # a real directory (beds deposited in place) is never replaced
+    assert not (own / "packings").is_symlink() and (own / "packings" / "packing-y.h5").exists()
+
+    assert gd.packings_dir(tmp_path) == (tmp_path / "packings" / code_fingerprint()).absolute()
+    assert gd.packings_dir(tmp_path) == packing_cache(tmp_path / "packings")
+    monkeypatch.setenv("CRASHDEM_CACHE", str(tmp_path / "env"))
+    assert gd.packings_dir() == (tmp_path / "env" / "packings" / code_fingerprint()).absolute()

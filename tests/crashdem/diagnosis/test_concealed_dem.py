@@ -483,7 +483,7 @@ def _cli_diagnose(tmp_path, seed, recording):
     rec_path = write_recording(tmp_path / "rec.csv", recording)
     out = tmp_path / "out"
     (out / "baseline").mkdir(parents=True)
-    pk = gd.cache_dir() / "packings"  # reuse the generator's deposited beds
+    pk = gd.packings_dir()  # reuse the generator's deposited beds
     pk.mkdir(parents=True, exist_ok=True)
     (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
     sets = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in {
@@ -686,7 +686,7 @@ def test_cli_filter_class_from_csv(tmp_path):
     rec_path = write_recording(tmp_path / "rec.csv", case.recording)
     out = tmp_path / "out"
     (out / "baseline").mkdir(parents=True)
-    pk = gd.cache_dir() / "packings"
+    pk = gd.packings_dir()
     pk.mkdir(parents=True, exist_ok=True)
     (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
     argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),

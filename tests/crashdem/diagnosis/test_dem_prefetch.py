@@ -17,7 +17,7 @@ def _cache(tmp_path, name):
     """A fresh run cache sharing the generator's deposited beds (no deposition is repeated)."""
     root = tmp_path / name
     root.mkdir()
-    pk = gd.cache_dir() / "packings"
+    pk = gd.packings_dir()
     pk.mkdir(parents=True, exist_ok=True)
     (root / "packings").symlink_to(pk, target_is_directory=True)
     return root
