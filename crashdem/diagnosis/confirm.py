@@ -315,7 +315,9 @@ def _grain_fit(p: _Pass, factors: Sequence[float],
     (``_Confirmation.bic`` of its weighted residual, no parameter); the factor whose mean is
     lowest -- or, of those within ``GRAIN_FIT_MARGIN`` of it, the one nearest the model's
     grains -- when it beats the model's own grains (1) by ``GRAIN_FIT_MARGIN``. At factor 1
-    the first realisation is the baseline simulation itself."""
+    the first realisation is the baseline simulation itself, and the runs are those the
+    confirmation made already (``_reused_realisations``): the grain fit runs only the other
+    grain sizes."""
     c = p.c
     sim = p.search_sim
     anchor = p.tier.rows[0] if p.tier is not None else None
@@ -323,11 +325,13 @@ def _grain_fit(p: _Pass, factors: Sequence[float],
     sizes: list[dict[str, Any]] = []
     runs = 0
     for f in (1.0, *[float(x) for x in factors if float(x) != 1.0]):
-        scaled = _GrainScaled(sim, f)
         todo = reals if (f != 1.0 or anchor is not None) else reals[1:]
-        outs = _run_full(scaled, [(REPLICATE, ov) for ov in todo])
-        runs += scaled.n
-        rows = [c.row(REPLICATE, ov, None, o) for ov, o in zip(todo, outs)]
+        rows = _reused_realisations(c, len(todo)) if f == 1.0 else None
+        if rows is None:
+            scaled = _GrainScaled(sim, f)
+            outs = _run_full(scaled, [(REPLICATE, ov) for ov in todo])
+            runs += scaled.n
+            rows = [c.row(REPLICATE, ov, None, o) for ov, o in zip(todo, outs)]
         if anchor is not None:
             rows = [c.anchored(r, anchor) for r in rows]
         bics = [c.bic(r["rss"], 0) for r in rows if "rss" in r]
@@ -353,6 +357,20 @@ def _grain_fit(p: _Pass, factors: Sequence[float],
             chosen = min(near, key=lambda s: abs(math.log(s["radius_scale"])))["radius_scale"]
     return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "chosen": chosen, "runs": runs,
             "simulator": "search tier (anchored)" if anchor is not None else "full"}
+
+
+def _reused_realisations(c: _Confirmation, n: int) -> list[Row] | None:
+    """The grain fit's ``n`` realisations at the model's grains as the confirmation ran them
+    (``_Confirmation.realisation_rows``: the search simulator's baseline run when it is a
+    separate tier, then the replicates), or None when it did not run them all (the grain fit
+    then runs them)."""
+    got = c.realisation_rows
+    if got is None:
+        return None
+    rows = [r for r in got if r is not None]
+    if len(rows) != n:
+        return None
+    return rows
 
 
 @dataclass
@@ -605,6 +623,11 @@ class _Confirmation:
         self.forms_chosen: dict[str, dict[str, Any]] = {}
         # the whole-bed stiffness runs of the full tier (``stiffer_requests``), pooled per factor
         self.stiff_rows: list[Row] = []
+        # the baseline's realisations as run on the simulator the levels ran on, unanchored:
+        # that simulator's baseline run (None when it is the full model: the baseline
+        # simulation itself) and the replicates' runs in their order (set by the tier that ran
+        # them; the grain fit reads them at the model's grains, ``_reused_realisations``)
+        self.realisation_rows: list[Row | None] | None = None
 
     def _candidates(self) -> list[dict[str, Any]]:
         """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
@@ -994,6 +1017,7 @@ class _Confirmation:
             raise outs[0]
         raw = [self.row(n, ov, x, o) for (n, ov, x), o in zip(req, outs)]
         ref = raw[0]
+        self.realisation_rows = [ref] + [r for r in raw[1:] if r["hypothesis"] == REPLICATE]
         # anchored like the screening: each search run predicts the baseline simulation plus
         # the change its effect makes in the search simulator (its run minus that simulator's
         # baseline run), so the search simulator's own misfit is not read as an effect
@@ -1063,6 +1087,8 @@ class _Confirmation:
         stiff = self.stiffer_requests() if tier is None and self.replicates else []
         rows = self.run(sim, requests + stiff)
         stiff_rows, rows = rows[len(requests):], rows[:len(requests)]
+        if tier is None:
+            self.realisation_rows = [None] + [r for r in rows if r["hypothesis"] == REPLICATE]
         if tier is None and len(self.beds) > 1:
             # bed 0's base: the baseline simulation aligned as every run is (as the screening
             # aligned it when its raw channels are not at hand)

@@ -462,6 +462,39 @@ def test_grain_fit_confirms_at_the_grain_size_that_fits_the_recording():
     assert "The model's grains stand." in to_markdown(floor)
 
 
+@pytest.mark.parametrize("tiered", [False, True])
+def test_grain_fit_takes_the_model_grains_runs_from_the_confirmation(layering_case, monkeypatch,
+                                                                     tiered):
+    """At the model's grains the grain fit rates the realisations the confirmation has run
+    already (the replicates, and the search simulator's baseline run when the search runs on
+    a separate tier) instead of running them again: the same sizes, BICs and choice as when
+    it runs them itself, and exactly that many runs fewer (oracle: the grain fit with the
+    reuse switched off, and the simulators' call counts)."""
+    from crashdem.diagnosis import confirm
+
+    reps = [{"scenario.seed": s} for s in (2, 3, 4)]
+
+    def run(reuse):
+        if not reuse:
+            monkeypatch.setattr(confirm, "_reused_realisations", lambda c, n: None)
+        calls: list = []
+        kw = {"search_simulator": _scenario_rom_simulator(calls)} if tiered else {}
+        rep = screen_then_confirm(simulate(RomParams()), layering_case.recording,
+                                  _scenario_rom_simulator(calls), top_k=1, replicates=reps,
+                                  grain_fit=(1.25,), **kw)
+        monkeypatch.undo()
+        return rep, len(calls)
+
+    (kept, n_kept), (rerun, n_rerun) = run(True), run(False)
+    g, g0 = kept.fit["grain_fit"], rerun.fit["grain_fit"]
+    assert g["sizes"] == g0["sizes"] and g["chosen"] == g0["chosen"]
+    assert [s["realisations"] for s in g["sizes"]] == [1 + len(reps)] * 2
+    saved = len(reps) + (1 if tiered else 0)
+    assert g0["runs"] - g["runs"] == saved == n_rerun - n_kept
+    assert kept.simulations["grain_fit_simulations"] == g["runs"]
+    assert kept.missing_physics == rerun.missing_physics == "soil_layering", kept.decision
+
+
 def test_full_search_on_a_search_simulator_keeps_1_plus_top_k_full_runs(layering_case):
     """With a separate (cheaper) search simulator the levels run there (plus its baseline run
     and at most one refinement) and only the leading effects' best levels reach the full
