@@ -8,8 +8,8 @@ os.environ.setdefault("NUMBA_CACHE_DIR", os.path.join(os.path.dirname(__file__),
 # checkout, not in ~/.cache/crashdem: the suite must not read what another checkout (another
 # version of the soil engine) left in the home directory. Measured: a CI machine whose home
 # kept an earlier engine's beds failed 26 tests on the cache's rebuild warning.
-os.environ.setdefault("CRASHDEM_CACHE",
-                      os.path.abspath(os.path.join(os.path.dirname(__file__), "..", ".crashdem_cache")))
+_ROOT = os.path.abspath(os.path.join(os.path.dirname(__file__), ".."))
+os.environ.setdefault("CRASHDEM_CACHE", os.path.join(_ROOT, ".crashdem_cache"))
 
 # Hypothesis: the default profile is derandomized (examples drawn from a seed fixed per test),
 # so the suite gives the same verdict on every machine and every run -- a fresh CI clone has

@@ -343,7 +343,8 @@ def test_shared_beds_are_those_of_this_soil_engine(tmp_path, monkeypatch):
     from crashdem.run import packing_cache, share_packings
     from soil.packing import code_fingerprint
 
-    old, new = tmp_path / "packings" / "0123456789abcdef", tmp_path / "packings" / "fedcba9876543210"
+    old = tmp_path / "packings" / "0123456789abcdef"
+    new = tmp_path / "packings" / "fedcba9876543210"
     run = tmp_path / "runs" / "pid1"
     share_packings(run, old)
     assert (run / "packings").is_symlink() and (run / "packings").resolve() == old.resolve()
