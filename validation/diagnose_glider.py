@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import sys
 import time
 from dataclasses import replace
@@ -32,9 +31,6 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent
 SCENARIO = ROOT / "scenarios" / "glider_real.toml"
-#: the root of the deposited beds; the runs share its directory of this soil engine
-#: (``crashdem.run.packing_cache``), so another engine's bed is never offered to this one
-CACHE = Path(os.environ.get("CRASHDEM_CACHE", Path.home() / ".cache" / "crashdem")) / "packings"
 #: the small resolution of validation/glider_crash.py (MODES["small"])
 SMALL = {"soil.radius": 0.1, "soil.radius_spread": 0.1, "output.snapshots": 0,
          "output.plots": False}
@@ -77,7 +73,7 @@ def truth_recording(name: str, overrides: dict, out: Path, seed: int,
     from crashdem.run import packing_cache, run_scenario, share_packings
 
     runs = out / "truth_runs"
-    share_packings(runs, packing_cache(CACHE))
+    share_packings(runs, packing_cache())
     num = TRUTH_NUMERICS if numerics is None else numerics
     scen = sc.load(SCENARIO, {**SMALL, **num, **overrides,
                               "scenario.name": f"glider_truth_{name}"})
@@ -117,7 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out).resolve()
     t0 = time.perf_counter()
     base_dir = out / "baseline_run"
-    share_packings(base_dir, packing_cache(CACHE))
+    share_packings(base_dir, packing_cache())
     base_ov = {**SMALL, "output.directory": str(base_dir), "scenario.name": "glider_small"}
     base_path = base_dir / "glider_small.h5"
     if not base_path.exists():

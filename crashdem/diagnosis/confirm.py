@@ -365,12 +365,7 @@ def _reused_realisations(c: _Confirmation, n: int) -> list[Row] | None:
     separate tier, then the replicates), or None when it did not run them all (the grain fit
     then runs them)."""
     got = c.realisation_rows
-    if got is None:
-        return None
-    rows = [r for r in got if r is not None]
-    if len(rows) != n:
-        return None
-    return rows
+    return list(got) if got is not None and len(got) == n else None
 
 
 @dataclass
@@ -623,11 +618,12 @@ class _Confirmation:
         self.forms_chosen: dict[str, dict[str, Any]] = {}
         # the whole-bed stiffness runs of the full tier (``stiffer_requests``), pooled per factor
         self.stiff_rows: list[Row] = []
-        # the baseline's realisations as run on the simulator the levels ran on, unanchored:
-        # that simulator's baseline run (None when it is the full model: the baseline
-        # simulation itself) and the replicates' runs in their order (set by the tier that ran
-        # them; the grain fit reads them at the model's grains, ``_reused_realisations``)
-        self.realisation_rows: list[Row | None] | None = None
+        # the baseline's realisations run on the simulator the levels ran on, unanchored: that
+        # simulator's baseline run when it is a separate tier (the full model's is the baseline
+        # simulation itself, not a run), then the replicates' runs in their order (set by the
+        # tier that ran them; the grain fit reads them at the model's grains,
+        # ``_reused_realisations``)
+        self.realisation_rows: list[Row] | None = None
 
     def _candidates(self) -> list[dict[str, Any]]:
         """The screened hypotheses confirmed with a full run (at most ``top_k``), when the
@@ -1088,7 +1084,7 @@ class _Confirmation:
         rows = self.run(sim, requests + stiff)
         stiff_rows, rows = rows[len(requests):], rows[:len(requests)]
         if tier is None:
-            self.realisation_rows = [None] + [r for r in rows if r["hypothesis"] == REPLICATE]
+            self.realisation_rows = [r for r in rows if r["hypothesis"] == REPLICATE]
         if tier is None and len(self.beds) > 1:
             # bed 0's base: the baseline simulation aligned as every run is (as the screening
             # aligned it when its raw channels are not at hand)

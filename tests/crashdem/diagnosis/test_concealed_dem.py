@@ -479,13 +479,11 @@ def _cli_diagnose(tmp_path, seed, recording):
     from crashdem import cli
     from crashdem.diagnosis import generator_dem as gd
     from crashdem.recordings import write_recording
+    from crashdem.run import share_packings
 
     rec_path = write_recording(tmp_path / "rec.csv", recording)
     out = tmp_path / "out"
-    (out / "baseline").mkdir(parents=True)
-    pk = gd.packings_dir()  # reuse the generator's deposited beds
-    pk.mkdir(parents=True, exist_ok=True)
-    (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
+    share_packings(out / "baseline", gd.packings_dir())  # reuse the generator's deposited beds
     sets = [f"{k}={str(v).lower() if isinstance(v, bool) else v}" for k, v in {
         **gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS, "scenario.name": f"cli_baseline_{seed}"}.items()]
     argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
@@ -680,15 +678,13 @@ def test_cli_filter_class_from_csv(tmp_path):
     from crashdem import cli
     from crashdem.diagnosis import generator_dem as gd
     from crashdem.recordings import write_recording
+    from crashdem.run import share_packings
 
     case = gd.dem_filter_class_case(12)
     assert all(s.cfc is None for s in case.recording.values())  # the CSV declares no class
     rec_path = write_recording(tmp_path / "rec.csv", case.recording)
     out = tmp_path / "out"
-    (out / "baseline").mkdir(parents=True)
-    pk = gd.packings_dir()
-    pk.mkdir(parents=True, exist_ok=True)
-    (out / "baseline" / "packings").symlink_to(pk, target_is_directory=True)
+    share_packings(out / "baseline", gd.packings_dir())  # reuse the generator's deposited beds
     argv = ["diagnose", "--scenario", str(gd.scenario_path()), "--recording", str(rec_path),
             "--out", str(out), "--workers", "0"]
     for k, v in {**gd.BASE_OVERRIDES, **gd.BASELINE_NUMERICS,

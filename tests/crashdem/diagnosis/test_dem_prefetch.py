@@ -11,15 +11,13 @@ import pytest
 
 from crashdem.diagnosis import generator_dem as gd
 from crashdem.diagnosis.parallel import default_workers
+from crashdem.run import share_packings
 
 
 def _cache(tmp_path, name):
     """A fresh run cache sharing the generator's deposited beds (no deposition is repeated)."""
     root = tmp_path / name
-    root.mkdir()
-    pk = gd.packings_dir()
-    pk.mkdir(parents=True, exist_ok=True)
-    (root / "packings").symlink_to(pk, target_is_directory=True)
+    share_packings(root, gd.packings_dir())
     return root
 
 
