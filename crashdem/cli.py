@@ -250,6 +250,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "times each factor; when one grain size fits the recording decisively "
                         "better than the scenario's, make the whole confirmation at it "
                         "(default off; e.g. 0.8,1.25,1.5)")
+    d.add_argument("--grain-fit-tier", default=None, choices=("search", "tier", "full"),
+                   help="where the grain fit runs when the search runs on the coarse tier: "
+                        "search (default) on that tier; tier = on the scenario's own grains in "
+                        "the coarse tier's container (when one impact there costs at most as "
+                        "much as in a bed of about 5,000 grains); full = on the scenario itself "
+                        "(5 full runs per grain size). Measured at the default resolution, "
+                        "neither found a recording's grain size")
     d.add_argument("--grain-check-agree", default=None, choices=("all", "any"),
                    help="how many of the --grain-check factors must name the effect: all "
                         "(default) or any (at least one)")

@@ -7,17 +7,21 @@
     python validation/diagnose_cost.py --effect sensor_dynamics --value 60      # mount [Hz]
     python validation/diagnose_cost.py --warm    # and again, with the beds of the first run
     python validation/diagnose_cost.py --effect none --recalibrate soil.material.young=4e7
+    python validation/diagnose_cost.py --effect none --truth-grains 1.25 \
+        --cli-args "--grain-fit 0.8,1.25,1.5"      # a truth of coarser grains
 
 Truth: ``validation/scenarios/drop_s2_h13p70.toml`` at its resolution (0.075 m grains, 6 m
 tank, the compacted layer below 1 m) with another packing seed (7), ``solver.safety`` 0.2
 (baseline 0.3), the concealed effect switched on (``--effect none``: no effect; ``--recalibrate KEY=VALUE``:
 a soil value other than the scenario's, ``generator_dem.check_recalibration``, a
-recalibration that must not be named missing physics), sampled at 50 kHz and acquired like a lab
-channel (``generator.acquire_samples``: 12.5 kHz, noise, +-2 ms trigger, CFC 60), written as
-CSV. Then the command a user runs, ``crashdem diagnose --scenario drop_s2_h13p70.toml
---recording rec.csv --out DIR``, is run as a subprocess and timed: the baseline run (its
-deposition included), the screening, the coarse full-model search and the full-resolution
-confirmation runs on Dask. The truth run is cached (``~/.cache/crashdem/diagnosis_truth``);
+recalibration that must not be named missing physics; ``--truth-grains F``: grains F x the
+scenario's 0.075 m, as another code's recording has grains the scenario does not know),
+sampled at 50 kHz and acquired like a lab channel (``generator.acquire_samples``: 12.5 kHz,
+noise, +-2 ms trigger, CFC 60), written as CSV. Then the command a user runs, ``crashdem diagnose
+--scenario drop_s2_h13p70.toml --recording rec.csv --out DIR``, is run as a subprocess and timed:
+the baseline run (its deposition included), the screening, the coarse full-model search and the
+full-resolution confirmation runs on Dask. The truth run is cached
+(``~/.cache/crashdem/diagnosis_truth``);
 the diagnosis is not: a fresh ``DIR`` and a fresh, empty ``--packing-cache`` (``DIR/..``
 ``/packing_cache``), so every bed is deposited, as on a user's first diagnosis, and
 ``--run-cache off``, so every run is made. With ``--warm`` the same command is then run again
@@ -61,10 +65,16 @@ EFFECT_EXTRA = {"sensor_dynamics": {"physics.sensor_dynamics.model": "mount",
                                     "physics.sensor_dynamics.damping_ratio": 0.1}}
 
 
+#: the span of ``--truth-grains`` (a factor on the scenario's grain radius)
+TRUTH_GRAINS = (0.8, 1.5)
+
+
 def truth_recording(effect: str | None, value: float, out: Path, threads: int,
-                    recalibration: dict[str, float] | None = None) -> Path:
+                    recalibration: dict[str, float] | None = None,
+                    grains: float = 1.0) -> Path:
     """Run (or load) the default-resolution truth and write the lab recording as CSV
-    (``effect`` None: no effect; ``recalibration``: the truth's other soil values)."""
+    (``effect`` None: no effect; ``recalibration``: the truth's other soil values; ``grains``:
+    the truth's grain radius over the scenario's, within ``TRUTH_GRAINS``)."""
     import numpy as np
 
     from crashdem.diagnosis.generator import acquire_samples
@@ -74,6 +84,12 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
     ov = {**DEFAULT_RESOLUTION, "scenario.seed": 7, "solver.safety": 0.2,
           "instrumentation.sample_rate": 50000.0, "scenario.threads": threads,
           **check_recalibration(recalibration)}
+    lo, hi = TRUTH_GRAINS
+    if not lo <= grains <= hi:
+        raise ValueError(f"grains={grains!r}: must be in [{lo:g}, {hi:g}] (the truth's grain "
+                         "radius over the scenario's)")
+    if grains != 1.0:
+        ov["soil.radius"] = DEFAULT_RESOLUTION["soil.radius"] * grains
     if effect is not None:
         ov.update({f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value,
                    **EFFECT_EXTRA.get(effect, {})})
@@ -90,7 +106,9 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
                           source="crashdem DEM truth at the default resolution ("
                                  + (f"{effect} = {value:g}" if effect else "no effect")
                                  + "".join(f", {k} = {v:g}" for k, v in
-                                           (recalibration or {}).items()) + ")")
+                                           (recalibration or {}).items())
+                                 + (f", grains {grains:g} x the scenario's" if grains != 1.0
+                                    else "") + ")")
     out.mkdir(parents=True, exist_ok=True)
     return write_recording(out / "rec.csv", rec)
 
@@ -125,6 +143,9 @@ def main(argv=None) -> int:
                     metavar="KEY=VALUE",
                     help="a soil value of the truth other than the scenario's, e.g. "
                          "soil.material.young=4e7 (keys: generator_dem.RECALIBRATION_KEYS)")
+    ap.add_argument("--truth-grains", type=float, default=1.0, metavar="F",
+                    help="the truth's grain radius as F x the scenario's 0.075 m (in "
+                         f"[{TRUTH_GRAINS[0]:g}, {TRUTH_GRAINS[1]:g}]; default 1)")
     ap.add_argument("--cli-args", default="", metavar="ARGS",
                     help="more options of crashdem diagnose, e.g. \"--grain-check 1.1,0.9 "
                          "--grain-check-agree any\"")
@@ -138,7 +159,12 @@ def main(argv=None) -> int:
     effect = None if args.effect == "none" else args.effect
     out = Path(args.out)
     t0 = time.perf_counter()
-    rec = truth_recording(effect, args.value, out, args.threads, recal)
+    try:
+        rec = truth_recording(effect, args.value, out, args.threads, recal, args.truth_grains)
+    except ValueError as err:
+        if "grains=" not in str(err):
+            raise
+        ap.error(f"--truth-grains: {err}")
     t_truth = time.perf_counter() - t0
     cache = out / "packing_cache"
     shutil.rmtree(cache, ignore_errors=True)
@@ -169,7 +195,8 @@ def main(argv=None) -> int:
               f"deposited), {'the same' if same else 'ANOTHER'} answer and hypotheses")
     named = next((h for h in rep["hypotheses"] if h["name"] == rep["missing_physics"]), None)
     row = {"truth": effect, "value": args.value if effect else None,
-           "recalibration": recal, "claimed": rep["missing_physics"],
+           "recalibration": recal, "truth_grains": args.truth_grains,
+           "claimed": rep["missing_physics"],
            "parameters": named["parameters"] if named else None,
            "score_before": rep["fit"]["before"]["overall"],
            "score_after": (rep["fit"].get("after_full") or rep["fit"]["after"])["overall"],
@@ -180,7 +207,10 @@ def main(argv=None) -> int:
            "diagnosis_over_baseline_run": wall / base_wall if base_wall else None,
            "beds_deposited": rep["simulations"]["packing_cache"]["beds_deposited"], "warm": warm,
            "grain_check": rep["fit"].get("grain_check"),
-           "grain_check_simulations": rep["simulations"].get("grain_check_simulations")}
+           "grain_check_simulations": rep["simulations"].get("grain_check_simulations"),
+           "grain_fit": {k: v for k, v in (rep["fit"].get("grain_fit") or {}).items()
+                         if k != "at_model_grains"} or None,
+           "grain_fit_simulations": rep["simulations"].get("grain_fit_simulations")}
     print(f"diagnosis of a default-resolution recording: {wall:.0f} s "
           f"({'within' if wall <= 900 else 'OVER'} the 15 min budget); claimed "
           f"{row['claimed']} {row['parameters']}; full runs {row['full_simulations']}, search "

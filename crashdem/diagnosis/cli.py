@@ -406,15 +406,21 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:
             reps, numerics, grain, gfit, level_beds = [], (), (), (), 1
+        gfit_sim, gfit_how = _grain_fit_setup(
+            scen, search_sim, gfit, getattr(args, "grain_fit_tier", None) or "search", cmap,
+            Path(args.out), packing_cache=pcache, run_cache=rcache, full_sim=full)
         rep = screen_then_confirm(baseline, rec, full, top_k=max(1, int(n_full) - 1),
                                   rom_base=base_params, calibrate_to_baseline=source != "rom",
                                   baseline_raw=base_raw, full_search=searched,
                                   search_simulator=search_sim, replicates=reps,
                                   numerics=numerics, level_beds=level_beds,
                                   grain_check=grain, grain_fit=gfit,
+                                  grain_fit_simulator=gfit_sim,
                                   grain_agree=getattr(args, "grain_check_agree", None)
                                   or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
+        if gfit_how is not None:
+            rep.simulations["grain_fit"] = gfit_how
         if one_bed is not None:
             rep.simulations["imported_bed"] = one_bed
         if hasattr(full, "describe"):
@@ -572,6 +578,12 @@ SEARCH_COARSE: dict[str, Any] = {"soil.radius": 0.10, "soil.radius_spread": 0.10
 #: campaign's 1 m compacted layer (E x 3: 3,553) and the 6 m tank (18,462; 16,336 deposited)
 #: stay on the coarse tier
 AUTO_FULL_LOAD = 2500
+#: ``--grain-fit-tier tier`` runs the grain fit on ``grain_fit_tier`` when one impact there costs
+#: at most this (``search_load``). The grain fit is 5 realisations at each of 4 grain sizes, 20
+#: runs against the search's 73-79, so at this load it costs about what 40 search runs at
+#: ``AUTO_FULL_LOAD`` do, about half the search's measured 263-298 s. The drop scenarios'
+#: 0.075 m grains with their 1 m compacted layer (E x 3) in the 2 m tank: 3,553
+GRAIN_FIT_TIER_LOAD = 5000
 #: the solid fraction ``bed_grains`` assumes (deposited beds: 0.55-0.6)
 BED_SOLID_FRACTION = 0.6
 #: the grain ``AUTO_FULL_LOAD`` counts in: the campaign soil's smallest grain (0.075 m,
@@ -759,6 +771,57 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                               f"leading ones confirmed at the scenario's"
                               + (" (the coarse tier on deposited beds: the imported bed is "
                                  "the scenario's only)" if bed is not None else "") + note)
+
+
+def grain_fit_tier(scen) -> dict[str, Any]:
+    """The overrides of the grain fit's tier for ``scen``: the coarse search tier's container
+    (``search_tier``) with the scenario's own grains (radius and spread). The grain fit asks
+    how the response changes when the scenario's grains are made coarser or finer; on the
+    coarse tier, whose grains are already coarser, a factor makes another change (measured:
+    a crashdem truth at 1.25 x the scenario's grains rated worst of the larger sizes there,
+    docs/diagnosis.md "The grain fit")."""
+    return {k: v for k, v in search_tier(scen).items()
+            if k not in ("soil.radius", "soil.radius_spread")}
+
+
+def _grain_fit_setup(scen, search_sim, factors: tuple[float, ...], mode: str,
+                     cmap: dict[str, str], out: Path, packing_cache: Path | None = None,
+                     run_cache: Any = None, full_sim: Any = None) -> tuple[Any, str | None]:
+    """The simulator the grain fit runs on (``--grain-fit-tier``; None: the one the search
+    runs on) and a one-line description (None when there is no grain fit). When the search runs
+    on a separate coarse tier: ``search`` (default) on it; ``tier`` on ``grain_fit_tier`` when
+    one impact there costs at most ``GRAIN_FIT_TIER_LOAD`` (``search_load``), else on the
+    search's simulator; ``full`` on the scenario itself (``full_sim``, the confirmation's
+    simulator: 5 full runs per grain size, the model's grains too). Neither ``tier`` nor
+    ``full`` found the grain size of a recording at the default resolution (docs/diagnosis.md
+    "The grain fit": the packings of one grain size scatter more than the sizes differ); they
+    are there to measure that on other recordings."""
+    if mode not in ("search", "tier", "full"):
+        raise ValueError(f"--grain-fit-tier={mode!r}: must be one of search, tier, full")
+    if not factors:
+        return None, None
+    if search_sim is None:
+        return None, "on the simulator the search runs on (the scenario itself)"
+    if mode == "full":
+        if full_sim is None:
+            raise ValueError("--grain-fit-tier=full: no full simulator to run it on")
+        return full_sim, "on the scenario itself (--grain-fit-tier full), anchored on the baseline"
+    if mode == "search":
+        return None, "on the coarse search tier (--grain-fit-tier search)"
+    ov = grain_fit_tier(scen)
+    load = search_load(scen.with_overrides(ov))
+    if load > GRAIN_FIT_TIER_LOAD:
+        return None, (f"on the coarse search tier (the scenario's grains in its container: load "
+                      f"{load:,.0f} > {GRAIN_FIT_TIER_LOAD:,})")
+    sim = _local_runner(scen.with_overrides(ov), cmap, out / "grain_fit_runs", run_cache)
+    if packing_cache is not None:
+        from crashdem.run import share_packings
+
+        share_packings(out / "grain_fit_runs", packing_cache)
+    what = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
+                     for k, v in ov.items())
+    return sim, (f"on the scenario's grains in the coarse tier's container ({what}; load "
+                 f"{load:,.0f} <= {GRAIN_FIT_TIER_LOAD:,}), anchored on the baseline")
 
 
 def _local_runner(scen, cmap: dict[str, str], out_dir: Path, run_cache: Any = None):

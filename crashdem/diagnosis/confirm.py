@@ -108,6 +108,13 @@ GRAIN_FIT_SCALES: tuple[float, ...] = ()
 #: how much lower (BIC, mean over the baseline's realisations) another grain size must fit the
 #: recording than the model's own grains for the grain fit to move to it
 GRAIN_FIT_MARGIN = 6.0
+#: ... and by this many standard errors of the difference of the two means (their realisations'
+#: sample standard deviations): a grain size is not taken on a difference the packing scatter
+#: makes. With both standard deviations at most 4 (the Yade sets' small bed, where the grain fit
+#: was measured) two standard errors stay below ``GRAIN_FIT_MARGIN``; at the default resolution
+#: (standard deviations 10-22) a full-model grain fit took 0.8 x on a recording of 1.25 x grains
+#: by 1.9 standard errors and then named a floor on it (docs/diagnosis.md "The grain fit")
+GRAIN_FIT_SE = 2.0
 
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
@@ -146,6 +153,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         grain_check: Sequence[float] = GRAIN_CHECK_SCALES,
                         grain_agree: str = GRAIN_CHECK_AGREE,
                         grain_fit: Sequence[float] = GRAIN_FIT_SCALES,
+                        grain_fit_simulator: Simulator | None = None,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -215,6 +223,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         (``fit.grain_fit``: each size's BIC, the size chosen, the answer at the model's
         grains and the baseline's score there; ``fit.before`` stays the scenario's own
         baseline). The grain check then scales from the chosen grain size
+    grain_fit_simulator : run the grain fit's realisations on this simulator instead of the
+        one the search ran on (e.g. the scenario's own grains in the coarse tier's smaller
+        container, when the search runs on a coarse tier whose grain radius is not the
+        scenario's): every realisation at every size, the model's grains too, each anchored on
+        the baseline simulation through this simulator's own baseline run at the model's
+        grains (``fit.grain_fit.simulator``)
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -249,7 +263,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                       level_beds=level_beds, numerics=numerics, **diagnose_kw)
     fitted = None
     if grain_fit and not p.c.model_free and not p.c.cfc_key:
-        fitted = _grain_fit(p, grain_fit, replicates)
+        fitted = _grain_fit(p, grain_fit, replicates, grain_fit_simulator)
         if fitted["chosen"] != 1.0:
             f = fitted["chosen"]
             at_model = p
@@ -306,32 +320,41 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     return rep
 
 
-def _grain_fit(p: _Pass, factors: Sequence[float],
-               replicates: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[str, Any]],
+               tier_sim: Simulator | None = None) -> dict[str, Any]:
     """The grain fit of ``screen_then_confirm``: the baseline's realisations (its own packing
     and the replicates) at each grain-radius factor, on the simulator the search ran on
     (anchored on the baseline simulation through that simulator's own baseline run at the
-    model's grains when it is a separate tier), each rated by its BIC against the recording
-    (``_Confirmation.bic`` of its weighted residual, no parameter); the factor whose mean is
-    lowest -- or, of those within ``GRAIN_FIT_MARGIN`` of it, the one nearest the model's
-    grains -- when it beats the model's own grains (1) by ``GRAIN_FIT_MARGIN``. At factor 1
-    the first realisation is the baseline simulation itself, and the runs are those the
+    model's grains when it is a separate tier), or on ``tier_sim`` when given (every
+    realisation at every factor, anchored through its own baseline run at the model's
+    grains), each rated by its BIC against the recording (``_Confirmation.bic`` of its
+    weighted residual, no parameter); the factor whose mean is lowest -- or, of those within
+    ``GRAIN_FIT_MARGIN`` of it, the one nearest the model's grains -- when it beats the
+    model's own grains (1) by ``GRAIN_FIT_MARGIN``. Without ``tier_sim``, at factor 1 the
+    first realisation is the baseline simulation itself, and the runs are those the
     confirmation made already (``_reused_realisations``): the grain fit runs only the other
     grain sizes."""
     c = p.c
-    sim = p.search_sim
-    anchor = p.tier.rows[0] if p.tier is not None else None
+    own_tier = tier_sim is not None
+    sim = tier_sim if own_tier else p.search_sim
+    anchor = p.tier.rows[0] if p.tier is not None and not own_tier else None
     reals: list[dict[str, Any]] = [{}, *[dict(r) for r in replicates]]
     sizes: list[dict[str, Any]] = []
     runs = 0
     for f in (1.0, *[float(x) for x in factors if float(x) != 1.0]):
-        todo = reals if (f != 1.0 or anchor is not None) else reals[1:]
-        rows = _reused_realisations(c, len(todo)) if f == 1.0 else None
+        todo = reals if (f != 1.0 or anchor is not None or own_tier) else reals[1:]
+        rows = _reused_realisations(c, len(todo)) if f == 1.0 and not own_tier else None
         if rows is None:
             scaled = _GrainScaled(sim, f)
             outs = _run_full(scaled, [(REPLICATE, ov) for ov in todo])
             runs += scaled.n
             rows = [c.row(REPLICATE, ov, None, o) for ov, o in zip(todo, outs)]
+        if own_tier and f == 1.0:
+            if "aligned" not in rows[0]:
+                raise RuntimeError("the grain fit's tier: its baseline run at the model's grains "
+                                   f"failed ({rows[0].get('error', 'no signals')}), so no run "
+                                   "can be anchored on it")
+            anchor = rows[0]
         if anchor is not None:
             rows = [c.anchored(r, anchor) for r in rows]
         bics = [c.bic(r["rss"], 0) for r in rows if "rss" in r]
@@ -343,20 +366,45 @@ def _grain_fit(p: _Pass, factors: Sequence[float],
             continue
         sizes.append({"radius_scale": f, "bic_mean": float(np.mean(bics)),
                       "bic_sd": float(np.std(bics, ddof=1)) if len(bics) > 1 else None,
-                      "score_mean": float(np.mean(scores)), "realisations": len(bics)})
+                      "score_mean": float(np.mean(scores)), "realisations": len(bics),
+                      "bics": [float(b) for b in bics]})
+    return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "se_factor": GRAIN_FIT_SE,
+            "chosen": grain_choice(sizes), "runs": runs,
+            "simulator": ("grain-fit tier (anchored)" if own_tier else
+                          "search tier (anchored)" if anchor is not None else "full")}
+
+
+def grain_choice(sizes: list[dict[str, Any]]) -> float:
+    """The grain-radius factor the grain fit takes from its sizes (``radius_scale``,
+    ``bic_mean``, ``bic_sd`` or None, ``realisations``): another size than the model's (1)
+    only when it beats the model's mean BIC by ``GRAIN_FIT_MARGIN`` and by ``GRAIN_FIT_SE``
+    standard errors of the difference (``_se_of_difference``); of those within the margin of
+    the best, the one nearest the model's grains (the realisation means scatter by a few Delta
+    BIC between neighbouring grain sizes; moving further is not supported). Each size gets its
+    ``delta_bic_vs_model`` and ``se_vs_model``. 1 when the model's grains were not rated."""
     own = next((s for s in sizes if s["radius_scale"] == 1.0), None)
-    chosen = 1.0
-    if own is not None:
-        best = min(s["bic_mean"] for s in sizes)
-        # decisively better than the model's grains, and as good as the best within the
-        # margin: the one nearest the model's grains (the realisation means scatter by a few
-        # Delta BIC between neighbouring grain sizes; moving further is not supported)
-        near = [s for s in sizes if own["bic_mean"] - s["bic_mean"] > GRAIN_FIT_MARGIN
-                and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
-        if near:
-            chosen = min(near, key=lambda s: abs(math.log(s["radius_scale"])))["radius_scale"]
-    return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "chosen": chosen, "runs": runs,
-            "simulator": "search tier (anchored)" if anchor is not None else "full"}
+    if own is None:
+        return 1.0
+    for s in sizes:
+        s["delta_bic_vs_model"] = own["bic_mean"] - s["bic_mean"]
+        s["se_vs_model"] = _se_of_difference(own, s)
+    best = min(s["bic_mean"] for s in sizes)
+    near = [s for s in sizes if s["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
+            and s["delta_bic_vs_model"] > GRAIN_FIT_SE * s["se_vs_model"]
+            and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
+    if not near:
+        return 1.0
+    return float(min(near, key=lambda s: abs(math.log(s["radius_scale"])))["radius_scale"])
+
+
+def _se_of_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> float:
+    """Standard error of the difference of two grain sizes' mean BICs (``_grain_fit``'s
+    entries: each realisation's sample standard deviation over the square root of their
+    number; 0 for a size with one realisation, whose scatter is not known)."""
+    if a is b:
+        return 0.0
+    var = sum((x["bic_sd"] or 0.0) ** 2 / x["realisations"] for x in (a, b))
+    return math.sqrt(var)
 
 
 def _reused_realisations(c: _Confirmation, n: int) -> list[Row] | None:

@@ -288,20 +288,26 @@ def to_markdown(report, plots: list[str] | None = None,
         lines += ["", f"Grain fit ({gfit['runs']} runs): the baseline's realisations with the "
                   f"grain radius scaled, each size rated by the mean BIC of its realisations "
                   f"against the recording; another size is taken when it beats the model's "
-                  f"grains by {gfit['margin_bic']:g} (of those within that of the best, the "
-                  f"nearest). "
+                  f"grains by {gfit['margin_bic']:g}"
+                  + (f" and by {gfit['se_factor']:g} standard errors of the difference (the "
+                     f"realisations' scatter)" if gfit.get("se_factor") else "")
+                  + " (of those within the margin of the best, the nearest). "
+                  + (f"Run on: {gfit['simulator']}. " if gfit.get("simulator") else "")
                   + (f"Taken: x{gfit['chosen']:g}; the confirmation above is made with every run "
                      f"at it (the grain radius is part of the recalibration). At the model's "
                      f"grains it named "
                      + (at['named'] if at and at.get('named') else "nothing") + "."
                      if gfit["chosen"] != 1.0 else "The model's grains stand."),
-                  "", "| grain radius | mean BIC | sd | mean score | realisations |",
-                  "|---|---|---|---|---|"]
+                  "", ("| grain radius | mean BIC | sd | Delta BIC vs the model's grains (its "
+                       "standard error) | mean score | realisations |"),
+                  "|---|---|---|---|---|---|"]
         for g in gfit["sizes"]:
-            sd = g.get("bic_sd")
+            sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
             lines.append(f"| x{g['radius_scale']:g} | {g['bic_mean']:.1f} | "
-                         f"{'-' if sd is None else f'{sd:.1f}'} | {_fmt(g['score_mean'])} | "
-                         f"{g['realisations']} |")
+                         f"{'-' if sd is None else f'{sd:.1f}'} | "
+                         + ("-" if db is None or g["radius_scale"] == 1.0 else
+                            f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
+                         + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
     real = fit.get("realisation")
     if real and real.get("runs"):
         lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "

@@ -98,3 +98,18 @@ def test_the_ratio_is_taken_on_the_baseline_run_of_the_same_diagnosis(tmp_path):
     with h5py.File(tmp_path / "baseline" / "b.h5", "w") as f:
         f.attrs["wall_time"] = 42.5
     assert baseline_wall(tmp_path) == 42.5
+
+
+def test_a_truth_of_other_grains(monkeypatch, tmp_path):
+    """``--truth-grains F``: the null truth with the grain radius F x the scenario's 0.075 m and
+    nothing else changed; outside ``TRUTH_GRAINS`` an error naming the span, before any run."""
+    from validation.diagnose_cost import DEFAULT_RESOLUTION, TRUTH_GRAINS, truth_recording
+
+    null = _truth(monkeypatch, tmp_path, None, 0.0)
+    coarse = _truth(monkeypatch, tmp_path, None, 0.0, None, 1.25)
+    radius = pytest.approx(1.25 * DEFAULT_RESOLUTION["soil.radius"])
+    assert coarse == {**null, "soil.radius": radius}
+    assert _truth(monkeypatch, tmp_path, None, 0.0, None, 1.0) == null
+    for bad in (TRUTH_GRAINS[0] - 0.01, TRUTH_GRAINS[1] + 0.01, float("nan")):
+        with pytest.raises(ValueError, match=r"grains=.*: must be in \[0.8, 1.5\]"):
+            truth_recording(None, 0.0, tmp_path, 1, None, bad)

@@ -462,6 +462,78 @@ def test_grain_fit_confirms_at_the_grain_size_that_fits_the_recording():
     assert "The model's grains stand." in to_markdown(floor)
 
 
+def test_grain_fit_on_its_own_tier_is_anchored_through_that_tier():
+    """With ``grain_fit_simulator`` the grain fit runs every realisation at every size, the
+    model's grains too, on that simulator and anchors each through the tier's own baseline
+    run. Stand-ins: the full model (and search) has no grain-size response, the tier has one
+    (grains 1.2 x or more respond as a layer at 0.33 m does); a null recording from such
+    grains. On the search's simulator the grain fit cannot move; on the tier it takes 1.25 x.
+    The tier's own misfit cancels: the same tier off by a constant in every run rates every
+    size the same.
+    A tier whose baseline run fails is an error naming it, not a silent unanchored fit."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
+    from crashdem.signal import Signal
+
+    fs = {"soil_layering": DROP.full_search["soil_layering"]}
+    layer = fs["soil_layering"].overrides(0.33)
+    reps = [{"scenario.seed": s} for s in (2, 3)]
+    calls: list = []
+    rom = _scenario_rom_simulator(calls)
+    tier_calls: list = []
+
+    def tier(overrides):
+        tier_calls.append(dict(overrides))
+        ov = dict(overrides)
+        if float(ov.get(RADIUS_SCALE_KEY, 1.0)) >= 1.2:
+            ov.update(layer)
+        return rom(ov)
+
+    def offset_tier(overrides):
+        """The tier off by a constant in every run (each run is aligned on the recording by its
+        own onset, which a constant does not move)."""
+        off = {"accel_z": 5.0, "velocity_z": 0.2}
+        return {ch: Signal(v.name, v.t, v.data + off[ch], v.unit, v.cfc, dict(v.meta))
+                for ch, v in tier(overrides).items()}
+
+    truth = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(layer))
+    null = acquire(truth, np.random.default_rng(5))
+
+    def run(sim):
+        tier_calls.clear()
+        return screen_then_confirm(simulate(RomParams()), null, rom, top_k=0, full_search=fs,
+                                   replicates=reps, numerics=(), grain_fit=(1.25,),
+                                   grain_fit_simulator=sim)
+
+    on_search = run(None).fit["grain_fit"]
+    assert on_search["simulator"] == "full" and on_search["chosen"] == 1.0
+    assert not tier_calls
+
+    g = run(tier).fit["grain_fit"]
+    assert g["simulator"] == "grain-fit tier (anchored)" and g["chosen"] == 1.25
+    assert [s["realisations"] for s in g["sizes"]] == [1 + len(reps)] * 2
+    # every realisation at both sizes on the tier, its baseline run first
+    assert [{k: v for k, v in c.items() if k != RADIUS_SCALE_KEY} for c in tier_calls] == \
+        [{}, *reps] * 2
+    assert [c.get(RADIUS_SCALE_KEY, 1.0) for c in tier_calls] == [1.0] * 3 + [1.25] * 3
+
+    moved = run(offset_tier).fit["grain_fit"]
+    assert moved["chosen"] == 1.25
+    for a, b in zip(moved["sizes"], g["sizes"]):
+        assert a["bic_mean"] == pytest.approx(b["bic_mean"], rel=1e-9, abs=1e-9)
+
+    def broken(overrides):
+        if not overrides:
+            raise RuntimeError("bed did not settle")
+        return tier(overrides)
+
+    with pytest.raises(RuntimeError, match="the grain fit's tier: its baseline run at the "
+                                           "model's grains failed .*bed did not settle"):
+        run(broken)
+
+
 @pytest.mark.parametrize("tiered", [False, True])
 def test_grain_fit_takes_the_model_grains_runs_from_the_confirmation(layering_case, monkeypatch,
                                                                      tiered):
@@ -2324,3 +2396,93 @@ def test_a_candidate_whose_full_run_is_the_baseline_is_not_run():
     # the screening's claim runs whatever its value
     assert chosen("initial_conditions", [speed0, damping]) == (
         ["initial_conditions", "contact_damping"], {})
+
+
+def test_grain_fit_tier_is_the_scenario_grains_in_the_search_tier_container(tmp_path):
+    """``--grain-fit-tier tier``: when the search runs on the coarse tier, the grain fit runs
+    on the scenario's own grains in that tier's container (``cli.grain_fit_tier``), as long
+    as one impact there costs at most ``GRAIN_FIT_TIER_LOAD``; the campaign scenario with its
+    compacted layer (load 3,553 in the 2 m tank) does. Finer grains than that, ``search`` (the
+    default), or a search on the scenario itself leave it on the search's simulator; ``full``
+    takes the confirmation's simulator; no grain fit, no tier; an unknown mode is an error
+    naming the option."""
+    scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.cli import build_parser
+    from crashdem.diagnosis.cli import (
+        GRAIN_FIT_TIER_LOAD,
+        _grain_fit_setup,
+        grain_fit_tier,
+        search_load,
+    )
+    from crashdem.diagnosis.generator_dem import scenario_path
+
+    campaign = scenario.load(scenario_path())
+    assert campaign.get("physics.soil_layering.enabled")
+    assert grain_fit_tier(campaign) == {"container.diameter": 2.0}
+    load = search_load(campaign.with_overrides(grain_fit_tier(campaign)))
+    assert load == pytest.approx(3553, abs=1) and load <= GRAIN_FIT_TIER_LOAD
+
+    coarse_search = object()  # a search on the coarse tier (only its presence is read)
+
+    def setup(scen, mode="tier", search=coarse_search, factors=(1.25,), name="g"):
+        return _grain_fit_setup(scen, search, factors, mode, {}, tmp_path / name)
+
+    sim, how = setup(campaign)
+    assert callable(sim)
+    assert "the scenario's grains in the coarse tier's container (container.diameter=2" in how
+    assert "3,553 <= 5,000" in how
+    assert setup(campaign, factors=()) == (None, None)
+    sim, how = setup(campaign, "search")
+    assert sim is None and "--grain-fit-tier search" in how
+    parser = build_parser()
+    args = parser.parse_args(["diagnose", "--scenario", "s.toml", "--recording", "r.csv",
+                              "--out", "o"])
+    assert args.grain_fit_tier is None  # the CLI reads None as "search"
+    sim, how = setup(campaign, search=None)
+    assert sim is None and "the scenario itself" in how
+    fine = campaign.with_overrides({"soil.radius": 0.05})
+    sim, how = setup(fine, name="fine")
+    assert sim is None and f"> {GRAIN_FIT_TIER_LOAD:,}" in how, how
+    full = object()
+    assert _grain_fit_setup(campaign, object(), (1.25,), "full", {}, tmp_path / "f",
+                            full_sim=full)[0] is full
+    with pytest.raises(ValueError, match="--grain-fit-tier='coarse': must be one of search, "
+                                         "tier, full"):
+        setup(campaign, "coarse")
+
+
+def test_grain_choice_moves_only_beyond_the_packing_scatter():
+    """``confirm.grain_choice``: another grain size is taken only when its mean BIC beats the
+    model's grains by the margin and by ``GRAIN_FIT_SE`` standard errors of the difference.
+    Measured figures: the full-model grain fit at the default resolution on a recording of
+    1.25 x grains (43.9 +- 9.7 at 1 x, 29.2 +- 14.3 at 0.8 x, 5 realisations each: 14.7 is
+    1.9 standard errors, so it stays, where the margin alone took 0.8 x and then named a
+    floor); the Yade null 24 on the small bed (63.4 at 1 x, 42.9 at 1.25 x, 37.4 at 1.5 x, sd
+    2-4: it moves, to 1.25 x, the nearest within the margin of the best). One realisation per
+    size has no scatter to weigh: the margin alone decides."""
+    from crashdem.diagnosis.confirm import GRAIN_FIT_MARGIN, GRAIN_FIT_SE, grain_choice
+
+    def size(f, mean, sd, n=5):
+        return {"radius_scale": f, "bic_mean": mean, "bic_sd": sd, "realisations": n}
+
+    default_res = [size(1.0, 43.9, 9.7), size(0.8, 29.2, 14.3), size(1.25, 39.2, 15.6),
+                   size(1.5, 46.3, 22.2)]
+    assert grain_choice(default_res) == 1.0
+    d = {s["radius_scale"]: s for s in default_res}
+    assert d[0.8]["delta_bic_vs_model"] == pytest.approx(14.7)
+    assert d[0.8]["se_vs_model"] == pytest.approx(math.sqrt((9.7**2 + 14.3**2) / 5))
+    assert GRAIN_FIT_MARGIN < d[0.8]["delta_bic_vs_model"] < GRAIN_FIT_SE * d[0.8]["se_vs_model"]
+    # the same means with half the scatter: it moves
+    assert grain_choice([size(1.0, 43.9, 4.8), size(0.8, 29.2, 7.1)]) == 0.8
+
+    yade = [size(1.0, 63.4, 3.0), size(0.8, 70.1, 4.0), size(1.25, 42.9, 3.0),
+            size(1.5, 37.4, 2.0)]
+    assert grain_choice(yade) == 1.25
+    # with sds of at most 4, two standard errors stay below the margin: the margin decides
+    assert GRAIN_FIT_SE * math.sqrt(2 * 4.0**2 / 5) < GRAIN_FIT_MARGIN
+    assert grain_choice([size(1.0, 50.0, 4.0), size(1.25, 43.9, 4.0)]) == 1.25
+    assert grain_choice([size(1.0, 50.0, 4.0), size(1.25, 44.0, 4.0)]) == 1.0  # the margin
+
+    single = [size(1.0, 50.0, None, 1), size(1.25, 43.0, None, 1)]
+    assert grain_choice(single) == 1.25 and single[1]["se_vs_model"] == 0.0
+    assert grain_choice([size(1.25, 10.0, 1.0)]) == 1.0  # the model's grains not rated
