@@ -2457,9 +2457,10 @@ def test_grain_choice_moves_only_beyond_the_packing_scatter():
     Measured figures: the full-model grain fit at the default resolution on a recording of
     1.25 x grains (43.9 +- 9.7 at 1 x, 29.2 +- 14.3 at 0.8 x, 5 realisations each: 14.7 is
     1.9 standard errors, so it stays, where the margin alone took 0.8 x and then named a
-    floor); the Yade null 24 on the small bed (63.4 at 1 x, 42.9 at 1.25 x, 37.4 at 1.5 x, sd
-    2-4: it moves, to 1.25 x, the nearest within the margin of the best). One realisation per
-    size has no scatter to weigh: the margin alone decides."""
+    floor); the Yade null 24 on the small bed (session 48: 63.4 +- 5.9 at 1 x, 70.1 +- 4.0 at
+    0.8 x, 42.9 +- 6.2 at 1.25 x, 37.4 +- 10.2 at 1.5 x: it moves, to 1.25 x, by 5.4 standard
+    errors, the nearest within the margin of the best). One realisation per size has no
+    scatter to weigh: the margin alone decides."""
     from crashdem.diagnosis.confirm import GRAIN_FIT_MARGIN, GRAIN_FIT_SE, grain_choice
 
     def size(f, mean, sd, n=5):
@@ -2475,9 +2476,10 @@ def test_grain_choice_moves_only_beyond_the_packing_scatter():
     # the same means with half the scatter: it moves
     assert grain_choice([size(1.0, 43.9, 4.8), size(0.8, 29.2, 7.1)]) == 0.8
 
-    yade = [size(1.0, 63.4, 3.0), size(0.8, 70.1, 4.0), size(1.25, 42.9, 3.0),
-            size(1.5, 37.4, 2.0)]
+    yade = [size(1.0, 63.4, 5.9), size(0.8, 70.1, 4.0), size(1.25, 42.9, 6.2),
+            size(1.5, 37.4, 10.2)]
     assert grain_choice(yade) == 1.25
+    assert yade[2]["delta_bic_vs_model"] / yade[2]["se_vs_model"] == pytest.approx(5.4, abs=0.05)
     # with sds of at most 4, two standard errors stay below the margin: the margin decides
     assert GRAIN_FIT_SE * math.sqrt(2 * 4.0**2 / 5) < GRAIN_FIT_MARGIN
     assert grain_choice([size(1.0, 50.0, 4.0), size(1.25, 43.9, 4.0)]) == 1.25
