@@ -760,13 +760,8 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                 else f"a small bed: about {bed_grains(scen):,.0f} grains")
         return searched, None, (f"{len(searched)} effects on the scenario itself ({what}, load "
                                 f"{load:,.0f} <= {AUTO_FULL_LOAD:,}){note}")
-    search = _local_runner(scen.with_overrides(coarse), cmap, out / "search_runs", run_cache)
-    if packing_cache is not None:
-        from crashdem.run import share_packings
-
-        share_packings(out / "search_runs", packing_cache)
-    tier = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
-                     for k, v in coarse.items())
+    search, tier = _tier_runner(scen, coarse, cmap, out / "search_runs", packing_cache,
+                                run_cache)
     return searched, search, (f"{len(searched)} effects at the coarse resolution ({tier}), the "
                               f"leading ones confirmed at the scenario's"
                               + (" (the coarse tier on deposited beds: the imported bed is "
@@ -813,15 +808,22 @@ def _grain_fit_setup(scen, search_sim, factors: tuple[float, ...], mode: str,
     if load > GRAIN_FIT_TIER_LOAD:
         return None, (f"on the coarse search tier (the scenario's grains in its container: load "
                       f"{load:,.0f} > {GRAIN_FIT_TIER_LOAD:,})")
-    sim = _local_runner(scen.with_overrides(ov), cmap, out / "grain_fit_runs", run_cache)
+    sim, what = _tier_runner(scen, ov, cmap, out / "grain_fit_runs", packing_cache, run_cache)
+    return sim, (f"on the scenario's grains in the coarse tier's container ({what}; load "
+                 f"{load:,.0f} <= {GRAIN_FIT_TIER_LOAD:,}), anchored on the baseline")
+
+
+def _tier_runner(scen, ov: dict[str, Any], cmap: dict[str, str], out_dir: Path,
+                 packing_cache: Path | None, run_cache: Any) -> tuple[Any, str]:
+    """A local runner (``_local_runner``) of ``scen`` with the tier's overrides ``ov`` into
+    ``out_dir``, its beds deposited in ``packing_cache`` when given, and ``ov`` as text."""
+    sim = _local_runner(scen.with_overrides(ov), cmap, out_dir, run_cache)
     if packing_cache is not None:
         from crashdem.run import share_packings
 
-        share_packings(out / "grain_fit_runs", packing_cache)
-    what = ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
-                     for k, v in ov.items())
-    return sim, (f"on the scenario's grains in the coarse tier's container ({what}; load "
-                 f"{load:,.0f} <= {GRAIN_FIT_TIER_LOAD:,}), anchored on the baseline")
+        share_packings(out_dir, packing_cache)
+    return sim, ", ".join(f"{k}={v:g}" if isinstance(v, (int, float)) else f"{k}={v!r}"
+                          for k, v in ov.items())
 
 
 def _local_runner(scen, cmap: dict[str, str], out_dir: Path, run_cache: Any = None):
