@@ -21,9 +21,9 @@ noise, +-2 ms trigger, CFC 60), written as CSV. Then the command a user runs, ``
 --scenario drop_s2_h13p70.toml --recording rec.csv --out DIR``, is run as a subprocess and timed:
 the baseline run (its deposition included), the screening, the coarse full-model search and the
 full-resolution confirmation runs on Dask. The truth run is cached
-(``~/.cache/crashdem/diagnosis_truth``);
-the diagnosis is not: a fresh ``DIR`` and a fresh, empty ``--packing-cache`` (``DIR/..``
-``/packing_cache``), so every bed is deposited, as on a user's first diagnosis, and
+(``~/.cache/crashdem/diagnosis_truth``); the diagnosis is not: a fresh ``DIR`` and a fresh,
+empty ``--packing-cache`` (``DIR/..`` ``/packing_cache``), so every bed is deposited, as on a
+user's first diagnosis, and
 ``--run-cache off``, so every run is made. With ``--warm`` the same command is then run again
 into another directory with that packing cache (a user's next recording of the same scenario:
 no bed deposited) and its answer is checked against the first's; its runs are still all made
@@ -69,6 +69,16 @@ EFFECT_EXTRA = {"sensor_dynamics": {"physics.sensor_dynamics.model": "mount",
 TRUTH_GRAINS = (0.8, 1.5)
 
 
+def check_grains(grains: float) -> float:
+    """``grains`` (the truth's grain radius over the scenario's) as a float; ValueError naming
+    it and ``TRUTH_GRAINS`` when it is outside (or not a number)."""
+    lo, hi = TRUTH_GRAINS
+    if not lo <= float(grains) <= hi:
+        raise ValueError(f"grains={grains!r}: must be in [{lo:g}, {hi:g}] (the truth's grain "
+                         "radius over the scenario's)")
+    return float(grains)
+
+
 def truth_recording(effect: str | None, value: float, out: Path, threads: int,
                     recalibration: dict[str, float] | None = None,
                     grains: float = 1.0) -> Path:
@@ -84,10 +94,7 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
     ov = {**DEFAULT_RESOLUTION, "scenario.seed": 7, "solver.safety": 0.2,
           "instrumentation.sample_rate": 50000.0, "scenario.threads": threads,
           **check_recalibration(recalibration)}
-    lo, hi = TRUTH_GRAINS
-    if not lo <= grains <= hi:
-        raise ValueError(f"grains={grains!r}: must be in [{lo:g}, {hi:g}] (the truth's grain "
-                         "radius over the scenario's)")
+    grains = check_grains(grains)
     if grains != 1.0:
         ov["soil.radius"] = DEFAULT_RESOLUTION["soil.radius"] * grains
     if effect is not None:
@@ -160,11 +167,10 @@ def main(argv=None) -> int:
     out = Path(args.out)
     t0 = time.perf_counter()
     try:
-        rec = truth_recording(effect, args.value, out, args.threads, recal, args.truth_grains)
+        check_grains(args.truth_grains)
     except ValueError as err:
-        if "grains=" not in str(err):
-            raise
         ap.error(f"--truth-grains: {err}")
+    rec = truth_recording(effect, args.value, out, args.threads, recal, args.truth_grains)
     t_truth = time.perf_counter() - t0
     cache = out / "packing_cache"
     shutil.rmtree(cache, ignore_errors=True)

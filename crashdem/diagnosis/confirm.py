@@ -218,7 +218,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         baseline and its replicates (the realisations of the realisation floor, on the
         simulator the search ran on, anchored as its runs are) run again at each factor, and
         each grain size is rated by the mean BIC of its realisations against the recording.
-        When the best beats the model's own grains by ``GRAIN_FIT_MARGIN``, the confirmation
+        When another size beats the model's own grains decisively (``grain_choice``: by
+        ``GRAIN_FIT_MARGIN`` and by ``GRAIN_FIT_SE`` standard errors), the confirmation
         is made again with every run at that grain size (as one factor of the grain check)
         and its answer is the report's; the grain radius is then part of the recalibration
         (``fit.grain_fit``: each size's BIC, the size chosen, the answer at the model's
@@ -329,9 +330,8 @@ def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[
     model's grains when it is a separate tier), or on ``tier_sim`` when given (every
     realisation at every factor, anchored through its own baseline run at the model's
     grains), each rated by its BIC against the recording (``_Confirmation.bic`` of its
-    weighted residual, no parameter); the factor whose mean is lowest -- or, of those within
-    ``GRAIN_FIT_MARGIN`` of it, the one nearest the model's grains -- when it beats the
-    model's own grains (1) by ``GRAIN_FIT_MARGIN``. Without ``tier_sim``, at factor 1 the
+    weighted residual, no parameter); the factor taken is ``grain_choice``'s. Without
+    ``tier_sim``, at factor 1 the
     first realisation is the baseline simulation itself, and the runs are those the
     confirmation made already (``_reused_realisations``): the grain fit runs only the other
     grain sizes."""

@@ -100,7 +100,7 @@ def test_the_ratio_is_taken_on_the_baseline_run_of_the_same_diagnosis(tmp_path):
     assert baseline_wall(tmp_path) == 42.5
 
 
-def test_a_truth_of_other_grains(monkeypatch, tmp_path):
+def test_a_truth_of_other_grains(monkeypatch, tmp_path, capsys):
     """``--truth-grains F``: the null truth with the grain radius F x the scenario's 0.075 m and
     nothing else changed; outside ``TRUTH_GRAINS`` an error naming the span, before any run."""
     from validation.diagnose_cost import DEFAULT_RESOLUTION, TRUTH_GRAINS, truth_recording
@@ -113,3 +113,9 @@ def test_a_truth_of_other_grains(monkeypatch, tmp_path):
     for bad in (TRUTH_GRAINS[0] - 0.01, TRUTH_GRAINS[1] + 0.01, float("nan")):
         with pytest.raises(ValueError, match=r"grains=.*: must be in \[0.8, 1.5\]"):
             truth_recording(None, 0.0, tmp_path, 1, None, bad)
+    # the command line says so before any run, naming the option
+    from validation.diagnose_cost import main
+
+    with pytest.raises(SystemExit):
+        main(["--effect", "none", "--truth-grains", "2", "--out", str(tmp_path / "o")])
+    assert "--truth-grains: grains=2.0: must be in [0.8, 1.5]" in capsys.readouterr().err
