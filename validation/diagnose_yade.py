@@ -38,8 +38,9 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from crashdem.diagnosis.generator_dem import BASE_OVERRIDES  # noqa: E402
-from validation.diagnosis_yade.cases import (YADE_EFFECT_DRAWS, check_fixed,  # noqa: E402
-                                             yade_available, yade_case)
+from validation.diagnosis_yade.cases import (CONTACT_LAWS, OWN_LAW_EFFECTS,  # noqa: E402
+                                             YADE_EFFECT_DRAWS, check_fixed, yade_available,
+                                             yade_case)
 
 TOP_K = 2
 
@@ -190,7 +191,9 @@ def cli_case(effect: str | None, seed: int, out: str | Path, scenario: str | Pat
     t0 = time.perf_counter()
     effect, case, values = make_case(effect, seed, filter_class, raw, fixed, recalibration)
     name = f"{'filter_class' if filter_class else effect or 'null'}_{seed}" + "".join(
-        f"_{k.rsplit('.', 1)[1]}={v:g}" for k, v in sorted(case.recalibration.items()))
+        f"_{k.rsplit('.', 1)[1]}={v:g}" for k, v in sorted(case.recalibration.items())) + (
+        "" if case.meta.get("contact_law", "linear") == "linear"
+        else f"_{case.meta['contact_law']}")
     d = Path(out) / name
     d.mkdir(parents=True, exist_ok=True)
     rec = write_recording(d / "rec.csv", case.recording)
@@ -277,6 +280,12 @@ def main(argv=None) -> int:
                     help="mean grain radius [m] about which the Yade truths draw theirs "
                          "(default 0.10, the small bed's; e.g. 0.075, the campaign scenario's, "
                          "with --cli: a recording on a finer bed than the coarse search tier's)")
+    ap.add_argument("--contact-law", default="linear", choices=CONTACT_LAWS,
+                    help="Yade's contact law for the truths: its linear Cundall-Strack law (the "
+                         "model's) or its Hertz-Mindlin law, the default of most other DEM codes "
+                         "(grains of cases.HERTZ_YOUNG_FACTOR x the Young's modulus, calibrated "
+                         "on the penetration); the cohesion and contact damping cases, made with "
+                         "laws of their own, are left out with it")
     ap.add_argument("--on-yade-bed", action="store_true",
                     help="crashdem's baseline and runs on each case's own Yade bed "
                          "(soil.packing_file; the deposition shared, what is left is the "
@@ -308,6 +317,15 @@ def main(argv=None) -> int:
             use_truth_radius(args.truth_radius)
         except ValueError as err:
             ap.error(f"--truth-radius: {err}")
+    if args.contact_law != "linear":
+        from validation.diagnosis_yade.cases import use_contact_law
+
+        use_contact_law(args.contact_law)
+        left = [e for e in args.effects if e in OWN_LAW_EFFECTS]
+        if left:
+            print(f"--contact-law {args.contact_law}: {', '.join(left)} left out (Yade makes "
+                  f"them with laws of their own)")
+            args.effects = [e for e in args.effects if e not in OWN_LAW_EFFECTS]
     if args.scenario is not None:
         from crashdem.diagnosis.generator_dem import use_scenario
 

@@ -31,6 +31,19 @@ def test_yade_null_case_claims_nothing():
     assert row["claimed"] is None, row["decision"]
 
 
+def test_yade_hertz_mindlin_null_case_claims_nothing(monkeypatch):
+    """The null physics of seed 21 made with Yade's Hertz-Mindlin law (``--contact-law
+    hertz_mindlin``, the law of most other DEM codes; its modulus calibrated on the penetration)
+    on the bed of the linear case above: another contact law is not missing physics. The
+    search's crashdem runs are those of the linear null, so it adds one Yade impact."""
+    from validation.diagnose_yade import diagnose_case
+    from validation.diagnosis_yade import cases
+
+    monkeypatch.setattr(cases, "CONTACT_LAW", "hertz_mindlin")
+    row = diagnose_case(None, 21)
+    assert row["claimed"] is None, row["decision"]
+
+
 def test_yade_sensor_resonance_is_named_with_its_frequency():
     from validation.diagnose_yade import diagnose_case
 

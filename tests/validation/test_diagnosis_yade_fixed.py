@@ -346,3 +346,48 @@ def test_a_killed_yade_run_leaves_no_temporary_files_behind(monkeypatch, tmp_pat
     with pytest.raises(RuntimeError, match="yade failed"):
         cases.run_yade(cfg, tmp_path)
     assert not (store / f"{key}.npy").exists() and not list(store.glob(f"{key}.tmp-*"))
+
+
+def test_another_contact_law_changes_only_the_contact(monkeypatch, tmp_path, capsys):
+    """``yade_case(contact_law="hertz_mindlin")`` (``--contact-law``): the case hands Yade the
+    Hertz-Mindlin law, ``HERTZ_YOUNG_FACTOR`` x the Young's modulus and ``HERTZ_POISSON``, and
+    nothing else changes (the seed's draws and the bed's keys, so the same bed as the linear
+    law's). Cohesion and contact damping, which Yade makes with laws of their own, are refused
+    by name, as is an unknown law; the script leaves those cases out before any Yade run."""
+    import validation.diagnose_yade as dy
+
+    for effect in (None, "soil_layering", "boundary_proximity"):
+        lin = _cfg(monkeypatch, tmp_path, 12, effect)
+        hm = _cfg(monkeypatch, tmp_path, 12, effect, contact_law="hertz_mindlin")
+        assert "contact_law" not in lin  # the linear law's runs keep their keys
+        assert hm == {**lin, "contact_law": "hertz_mindlin",
+                      "hertz_poisson": cases.HERTZ_POISSON,
+                      "hertz_young": cases.HERTZ_YOUNG_FACTOR * lin["young"]}
+    monkeypatch.setattr(cases, "CONTACT_LAW", cases.CONTACT_LAW)  # restored after the test
+    cases.use_contact_law("hertz_mindlin")
+    assert _cfg(monkeypatch, tmp_path, 21, None)["contact_law"] == "hertz_mindlin"
+    assert "contact_law" not in _cfg(monkeypatch, tmp_path, 21, None, contact_law="linear")
+    monkeypatch.setattr(cases, "run_yade", lambda cfg, cache: pytest.fail("ran Yade"))
+    for effect in cases.OWN_LAW_EFFECTS:
+        with pytest.raises(ValueError, match=re.escape(
+                f"contact_law='hertz_mindlin' with effect={effect!r}")):
+            cases.yade_case(11, effect, cache=tmp_path)
+    with pytest.raises(ValueError, match=re.escape(
+            "contact_law='hooke': allowed: ['linear', 'hertz_mindlin']")):
+        cases.use_contact_law("hooke")
+    with pytest.raises(SystemExit) as ex:
+        dy.main(["--contact-law", "hooke"])
+    assert ex.value.code == 2 and "--contact-law" in capsys.readouterr().err
+    done = []
+    monkeypatch.setattr(dy, "yade_available", lambda: True)
+
+    def first_case(eff, s, **kw):  # stops the script at its first case
+        done.append(eff)
+        raise _Handed(eff)
+
+    monkeypatch.setattr(dy, "diagnose_case", first_case)
+    with pytest.raises(_Handed):
+        dy.main(["--contact-law", "hertz_mindlin", "--effects", "contact_damping", "cohesion",
+                 "sensor_dynamics", "--seeds", "11"])
+    assert done == ["sensor_dynamics"]
+    assert "contact_damping, cohesion left out" in capsys.readouterr().out

@@ -89,6 +89,26 @@ TRUTH_RADIUS = 0.10
 #: tank), at most 0.2 m (four grains across the 0.45 m sphere's radius)
 TRUTH_RADIUS_LIMITS = (0.03, 0.2)
 DT_FACTOR = (0.2, 0.4)
+#: the contact laws a Yade truth is made with: Yade's linear Cundall-Strack law (the thesis's and
+#: crashdem's) or its Hertz-Mindlin law (``Law2_ScGeom_MindlinPhys_Mindlin``, the default of
+#: most other DEM codes: LIGGGHTS, EDEM, MercuryDPM, Chrono's DEM)
+CONTACT_LAWS = ("linear", "hertz_mindlin")
+#: Poisson's ratio of the Hertz-Mindlin grains [-] (a quarry gravel's; the linear law's
+#: ``stiffness_ratio`` is ks/kn, not a Poisson's ratio)
+HERTZ_POISSON = 0.25
+#: Young's modulus of the Hertz-Mindlin grains over the linear law's [-], calibrated the way a
+#: user of such a code would: on the drop test's penetration. Yade null 21 at 13.7 m (its bed
+#: of 0.111 m grains) penetrates 0.609 m with the linear law and 0.728 / 0.659 / 0.601 / 0.524 /
+#: 0.477 / 0.429 m with the Hertz law at 2 / 3 / 4 / 6 / 9 / 14 x its modulus (peak force
+#: 500 kN linear, 462-808 kN Hertz). At 4 x the penetration matches within 1.5 % and the pulse
+#: still differs: its peak is 25 % higher and 3 ms earlier, and the sphere is still sinking at
+#: 0.2 m/s at 150 ms, where the linear law's has stopped (docs/diagnosis.md, "Another contact
+#: law")
+HERTZ_YOUNG_FACTOR = 4.0
+#: the contact law of every later case that does not name one (``use_contact_law``)
+CONTACT_LAW = "linear"
+#: effects Yade makes with laws of their own (the linear law's springs): not with another law
+OWN_LAW_EFFECTS = ("cohesion", "contact_damping")
 
 
 def bed_surface(x: np.ndarray, radius: np.ndarray, tank_radius: float) -> float:
@@ -284,10 +304,29 @@ def use_truth_radius(radius: float) -> None:
     TRUTH_RADIUS = float(radius)
 
 
+def check_contact_law(contact_law: str, effect: str | None = None) -> None:
+    """ValueError naming ``contact_law`` unless it is one of ``CONTACT_LAWS`` and ``effect``
+    can be made with it (``OWN_LAW_EFFECTS`` only with the linear law)."""
+    if contact_law not in CONTACT_LAWS:
+        raise ValueError(f"contact_law={contact_law!r}: allowed: {list(CONTACT_LAWS)}")
+    if contact_law != "linear" and effect in OWN_LAW_EFFECTS:
+        raise ValueError(f"contact_law={contact_law!r} with effect={effect!r}: Yade makes that "
+                         f"effect with its own linear law; allowed effects: "
+                         f"{sorted(set(YADE_EFFECT_DRAWS) - set(OWN_LAW_EFFECTS))} or None")
+
+
+def use_contact_law(contact_law: str) -> None:
+    """Make every later case that names no law with ``contact_law`` (``CONTACT_LAWS``)."""
+    global CONTACT_LAW
+    check_contact_law(contact_law)
+    CONTACT_LAW = contact_law
+
+
 def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
               cfc: float = 60.0, declare_cfc: bool = True, raw: bool = False,
               fixed: Mapping[str, float] | None = None,
-              recalibration: Mapping[str, float] | None = None) -> YadeCase:
+              recalibration: Mapping[str, float] | None = None,
+              contact_law: str | None = None) -> YadeCase:
     """A Yade recording with ``effect`` (a ``YADE_EFFECT_DRAWS`` name, or None for a null case)
     drawn from ``seed``, acquired like a lab channel; ``baseline`` is crashdem's DEM baseline.
 
@@ -307,7 +346,16 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     limits of ``generator_dem.check_recalibration``: ``soil.material.young``,
     ``friction_angle_deg``, ``density``, ``stiffness_ratio``), e.g. a stiffer bed: a wrong
     value of a parameter the model has, which is a recalibration, not missing physics. The
-    seed's draws are unchanged; the deposition uses them too (another bed)."""
+    seed's draws are unchanged; the deposition uses them too (another bed).
+
+    ``contact_law`` (``CONTACT_LAWS``; None: ``CONTACT_LAW``, set by ``use_contact_law``):
+    ``"hertz_mindlin"`` makes the impact with Yade's
+    Hertz-Mindlin law, its grains of ``HERTZ_YOUNG_FACTOR`` x the linear law's Young's modulus
+    and ``HERTZ_POISSON``, on the bed the linear law's case of the
+    same seed deposits; a null of it is a recording of the same physics by a code with another
+    contact law. Not with cohesion or contact damping (other laws in Yade)."""
+    contact_law = CONTACT_LAW if contact_law is None else contact_law
+    check_contact_law(contact_law, effect)
     if effect is not None and effect not in YADE_EFFECT_DRAWS:
         raise ValueError(f"effect={effect!r}: no Yade truth for it; allowed: "
                          f"{sorted(YADE_EFFECT_DRAWS)} or None")
@@ -350,6 +398,10 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
         "free_rotation": bool(drawn.get("free_rotation", False)),
         "restitution": drawn.get("restitution"),
     }
+    if contact_law != "linear":
+        # only then: the linear law's runs keep their configurations (and cache keys)
+        cfg.update(contact_law=contact_law, hertz_poisson=HERTZ_POISSON,
+                   hertz_young=HERTZ_YOUNG_FACTOR * m["young"])
     hist, info = run_yade(cfg, cache)
     t, vz, fz = hist[:, 0], hist[:, 2], hist[:, 3]
     k_c = int(np.argmax(fz > 0.0))  # first step with a contact force
@@ -385,5 +437,6 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
                     {"grains": info["grains"], "dt": info["dt"], "radius": radius,
                      "dt_factor": dt_factor, "trigger_offset_s": offset, "raw": raw,
                      "realised": realised, "packing_npz": info["packing_npz"],
-                     "tank_radius": cfg["tank_radius"], "cfg": dict(cfg)},
+                     "tank_radius": cfg["tank_radius"], "cfg": dict(cfg),
+                     "contact_law": contact_law},
                     recal)

@@ -18,6 +18,13 @@ Yade 2023.02a's own numerics, from its own deposition to its own contact laws:
    ``O.dt = dt_factor * PWaveTimeStep()``;
 3. the history (t, z, vz, Fz) of the drop mass every step -> ``<out>.npy`` (+ ``.json`` facts).
 
+``contact_law = "hertz_mindlin"`` makes the impact with Yade's Hertz-Mindlin law instead
+(``Ip2_FrictMat_FrictMat_MindlinPhys`` + ``Law2_ScGeom_MindlinPhys_Mindlin``, no damping): the
+grains, the tank and the drop mass are ``FrictMat`` with the Young's modulus ``hertz_young`` (the
+layer's ``layer_young_factor`` x it) and Poisson's ratio ``hertz_poisson``. The deposition
+stays linear (the bed is the same as the linear law's for the same seed). Not with
+``cohesion`` or ``restitution``.
+
 Everything else (the speed offset, the sensor, the acquisition) is applied by the driver.
 """
 
@@ -40,7 +47,11 @@ r_mean = cfg["radius"]
 g = cfg["gravity"]
 
 
-def frict(young, density, phi, coh=None, betan=None):
+def frict(young, density, phi, coh=None, betan=None, poisson=None):
+    if poisson is not None:
+        # Hertz-Mindlin: poisson is the material's Poisson's ratio (MindlinPhys), not ks/kn
+        return O.materials.append(FrictMat(  # noqa: F821
+            young=young, poisson=poisson, frictionAngle=phi, density=density))
     if betan is not None:
         # Cundall-Strack springs (kn, ks as FrictPhys) + normal dashpot cn = betan * 2 sqrt(m* kn);
         # a pair takes the nonzero betan of its two materials
@@ -120,15 +131,20 @@ beta = None if e is None else -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e
 # with a dashpot every material is a FrictViscoMat (the wall and the drop mass undamped, betan 0):
 # Yade's mixed FrictMat-FrictViscoMat functor takes the bodies in one order only
 other = None if beta is None else 0.0
-m_up = frict(cfg["young"], cfg["density"], cfg["friction_angle"], coh, beta)
+hertz = cfg.get("contact_law", "linear") == "hertz_mindlin"
+if hertz and (coh is not None or beta is not None):
+    raise SystemExit("contact_law='hertz_mindlin' is not made with cohesion or restitution")
+nu = cfg["hertz_poisson"] if hertz else None
+young = cfg["hertz_young"] if hertz else cfg["young"]
+m_up = frict(young, cfg["density"], cfg["friction_angle"], coh, beta, nu)
 m_low = m_up
 if cfg.get("layer_depth") is not None:
-    m_low = frict(cfg["young"] * cfg["layer_young_factor"], cfg["density"], cfg["friction_angle"],
-                  coh, beta)
-m_wall = frict(cfg["young"], cfg["density"], cfg["friction_angle"], betan=other)
+    m_low = frict(young * cfg["layer_young_factor"], cfg["density"], cfg["friction_angle"],
+                  coh, beta, nu)
+m_wall = frict(young, cfg["density"], cfg["friction_angle"], betan=other, poisson=nu)
 R = cfg["drop_radius"]
 rho_imp = cfg["drop_mass"] / (4.0 / 3.0 * math.pi * R ** 3)
-m_imp = frict(cfg["impactor_young"], rho_imp, 0.0, betan=other)
+m_imp = frict(cfg["impactor_young"], rho_imp, 0.0, betan=other, poisson=nu)
 tank(m_wall)
 surface = float(np.max(x[:, 2] + rad))
 z_layer = surface - cfg["layer_depth"] if cfg.get("layer_depth") is not None else -1.0
@@ -148,7 +164,10 @@ did = O.bodies.append(drop)  # noqa: F821
 # grain-grain geometry with the rotations the cohesion moments need; wall and facet contacts alike
 ig2 = [Ig2_Sphere_Sphere_ScGeom() if coh is None else Ig2_Sphere_Sphere_ScGeom6D(),  # noqa: F821
        Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
-if beta is not None:
+if hertz:
+    ip2 = [Ip2_FrictMat_FrictMat_MindlinPhys()]  # noqa: F821
+    law = [Law2_ScGeom_MindlinPhys_Mindlin()]  # noqa: F821
+elif beta is not None:
     ip2 = [Ip2_FrictViscoMat_FrictViscoMat_FrictViscoPhys()]  # noqa: F821
     law = [Law2_ScGeom_FrictViscoPhys_CundallStrackVisco()]  # noqa: F821
 elif coh is None:
