@@ -732,7 +732,7 @@ class _Confirmation:
                  **self.rated({ch: align(rec[ch], out[ch], shift) for ch in self.chans})}
         if x is not None:
             r["search_value"] = x
-            form = self.form_of(name, ov)
+            form = (_stiffer_form(ov) if name == STIFFER else self.form_of(name, ov))
             if form is not None:
                 r["form"] = form
         if "aligned" in r:
@@ -795,14 +795,18 @@ class _Confirmation:
         return keep
 
     def stiffer_requests(self) -> list[Request]:
-        """Requests of the whole bed made stiffer by each of ``catalogue.STIFFER_SOIL_FACTORS``
-        on each bed of a deposited level (``catalogue.stiffer_soil_overrides``), when the
-        layering is searched with its stiffness form; else none."""
+        """Requests of the bed made stiffer by each of ``catalogue.STIFFER_SOIL_FACTORS``, whole
+        and below its top grain row (``catalogue.stiffer_soil_depths``), on each bed of a
+        deposited level (``catalogue.stiffer_soil_overrides``), when the layering is searched
+        with its stiffness form; else none."""
+        lay = self.searched.get("soil_layering")
         out: list[Request] = []
-        for f in catalogue.STIFFER_SOIL_FACTORS:
-            ov = catalogue.stiffer_soil_overrides(self.searched.get("soil_layering"), f)
-            if ov is not None:
-                out += [(STIFFER, {**ov, **rv, **self.cfc_key}, float(f)) for rv in self.beds]
+        for below in catalogue.stiffer_soil_depths(lay):
+            for f in catalogue.STIFFER_SOIL_FACTORS:
+                ov = catalogue.stiffer_soil_overrides(lay, f, below)
+                if ov is not None:
+                    out += [(STIFFER, {**ov, **rv, **self.cfc_key}, float(f))
+                            for rv in self.beds]
         return out
 
     def run(self, sim: Simulator, requests: list[Request]) -> list[Row]:
@@ -1436,7 +1440,9 @@ class _Confirmation:
                 "scatter_delta_bic": f["scatter"]}
             if self.stiff_rows:
                 rep.fit["realisation"]["stiffer_soil"] = [
-                    {"young_factor": r["search_value"],
+                    {"young_factor": r["search_value"], "form": r.get("form", "whole bed"),
+                     "below_m": float(r["overrides"].get("physics.soil_layering.depth",
+                                                         catalogue.WHOLE_BED_DEPTH)),
                      "score": r["score"] if math.isfinite(r["score"]) else None,
                      "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
                      "runs": _n_runs([r]), **({"error": r["error"]} if "error" in r else {})}
@@ -1807,9 +1813,7 @@ class _Confirmation:
               f"{searched[confirmed].unit}" if confirmed and "search_value" in best else "")
         if self.replicates:
             rf = self.rep.fit["realisation"]
-            stiff = (" and the whole bed " + " / ".join(f"x{r['young_factor']:g}"
-                                                         for r in rf["stiffer_soil"])
-                     + " stiffer" if rf.get("stiffer_soil") else "")
+            stiff = _stiffer_text(rf.get("stiffer_soil") or [])
             how += (f"; realisation floor of {len(self.replicates)} replicate packings{stiff} "
                     f"on the {rf['tier']}: Delta BIC {rf['floor_delta_bic']:.1f}, score "
                     f"{rf['floor_score']:.3f}")
@@ -1977,6 +1981,23 @@ def _decisive(r: dict[str, Any], floor: dict[str, float]) -> bool:
     ``CONFIRM_MIN_GAIN`` above the best of reference and replicates): the rule for naming a
     full run and for promoting a search-tier level to one."""
     return _contends(r, floor, CONFIRM_MIN_GAIN)
+
+
+def _stiffer_text(stiff: Sequence[Mapping[str, Any]]) -> str:
+    """The decision's words for the stiffer-soil runs of the floor, e.g. " and the whole bed
+    x2 / x5 stiffer and the bed below 0.15 m x2 / x5 stiffer"."""
+    forms: dict[str, list[float]] = {}
+    for r in stiff:
+        forms.setdefault(r.get("form", "whole bed"), []).append(float(r["young_factor"]))
+    return "".join(f" and the {'whole bed' if form == 'whole bed' else 'bed ' + form} "
+                   + " / ".join(f"x{f:g}" for f in fs) + " stiffer" for form, fs in forms.items())
+
+
+def _stiffer_form(ov: Mapping[str, Any]) -> str:
+    """The form of a stiffer-soil run (``stiffer_requests``) from its overrides: "whole bed",
+    or "below D m" (the bed stiffer below its top grain row; its runs pool apart)."""
+    below = float(ov.get("physics.soil_layering.depth", catalogue.WHOLE_BED_DEPTH))
+    return "whole bed" if below <= catalogue.WHOLE_BED_DEPTH else f"below {below:g} m"
 
 
 def _realisation_floor(rows: Iterable[dict[str, Any]], reference_score: float,

@@ -326,13 +326,16 @@ def to_markdown(report, plots: list[str] | None = None,
                          f"{'-' if db is None else f'{db:.1f}'} |")
         if real.get("stiffer_soil"):
             lines += ["", ("A stiffer soil is a recalibration, not missing physics: the floor "
-                           "also holds the baseline's beds with every grain's modulus multiplied "
-                           "(the change averaged over the beds)."), "",
-                      "| whole bed | score | Delta BIC vs reference |", "|---|---|---|"]
+                           "also holds the baseline's beds with the grains' modulus multiplied, "
+                           "in the whole bed and below its top grain row, whose stiffness "
+                           "against the confined grains a layer that shallow is not told apart "
+                           "from (the change averaged over the beds)."), "",
+                      "| grains | E factor | score | Delta BIC vs reference |",
+                      "|---|---|---|---|"]
             for r in real["stiffer_soil"]:
                 db = r.get("delta_bic_vs_reference")
-                lines.append(f"| E x{r['young_factor']:g} | {_fmt(r.get('score'))} | "
-                             f"{'-' if db is None else f'{db:.1f}'} |")
+                lines.append(f"| {r.get('form', 'whole bed')} | x{r['young_factor']:g} | "
+                             f"{_fmt(r.get('score'))} | {'-' if db is None else f'{db:.1f}'} |")
     det = fit.get("detectability")
     if det and det.get("effects"):
         lines += ["", f"Detectability: how far each search level moves the baseline simulation "

@@ -227,8 +227,9 @@ N_SEARCH_RUNS = sum(fs.n_levels * (N_BEDS if fs.deposits else 1)
 #: runs of the extension levels beyond a strong end (``FullSearch.extension``), when all run
 N_EXTENSION_RUNS = sum(len(fs.extension) * (N_BEDS if fs.deposits else 1)
                        for fs in DROP.full_search.values())
-#: runs of the whole bed made stiffer (the realisation floor's recalibration), on each bed
-N_STIFFER_RUNS = len(STIFFER_SOIL_FACTORS) * N_BEDS
+#: runs of the bed made stiffer, whole and below its top grain row (the realisation floor's
+#: recalibration, ``stiffer_soil_depths``), on each bed
+N_STIFFER_RUNS = 2 * len(STIFFER_SOIL_FACTORS) * N_BEDS
 
 
 def test_dem_diagnosis_cost(dem_runs):

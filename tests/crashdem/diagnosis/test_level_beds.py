@@ -160,13 +160,27 @@ def test_deposited_levels_run_on_every_bed_and_are_counted(case, tmp_path):
             assert lv.get("beds", 1) == (beds if dep else 1)
         # beds 2..: each deposited level (and a deposited refinement) once more with each
         # replicate's seed, its other overrides those of bed 0
-        # the whole bed made stiffer (the realisation floor's recalibration runs) on every bed
+        # the whole bed made stiffer (the realisation floor's recalibration runs) on every bed,
+        # and the bed stiffer below its top grain row, the 0.15 m x2 / x5 stiffness layer (x5
+        # is also the search's own 0.15 m level: the same overrides, run in both places)
         stiff_runs = [c for c in calls
                       if c.get("physics.soil_layering.depth") == cat.WHOLE_BED_DEPTH]
         assert len(stiff_runs) == len(cat.STIFFER_SOIL_FACTORS) * beds
         assert sorted(c.get("scenario.seed", 0) for c in stiff_runs) == sorted(
             [0, 2, 3][:beds] * len(cat.STIFFER_SOIL_FACTORS))
-        bed_runs = [c for c in seeded if c not in REPS and c not in stiff_runs]
+        top = [c for c in calls if c.get("physics.soil_layering.depth") == 0.15
+               and c.get("physics.soil_layering.compacted") is False]
+        x2 = [c for c in top if c["physics.soil_layering.lower_young_factor"] == 2.0]
+        x5 = [c for c in top if c["physics.soil_layering.lower_young_factor"] == 5.0]
+        assert len(x2) == beds and len(x5) == 2 * beds
+        assert sorted(c.get("scenario.seed", 0) for c in x2) == [0, 2, 3][:beds]
+        # one copy of each stiffer-soil run taken away: what is left is the replicates and the
+        # level runs on beds 2..
+        rest = list(seeded)
+        for c in stiff_runs + x2 + x5[:beds]:
+            if "scenario.seed" in c:
+                rest.remove(c)
+        bed_runs = [c for c in rest if c not in REPS]
         pooled = [lv for lv in levels if "beds" in lv]
         assert len(pooled) == (n_dep + n_dep_ext + sum(lv["refined"] for lv in pooled)
                                if beds > 1 else 0)
