@@ -1880,8 +1880,9 @@ def _verdict(r: dict[str, Any], floor: dict[str, float], is_claim: bool,
     if db <= ACCEPT_MARGIN:
         return f"Delta BIC {db:.1f} over the reference, not above {ACCEPT_MARGIN:g}"
     if db - floor["delta_bic"] <= REALISATION_MARGIN:
-        return (f"fits no better than a replicate packing of the baseline (Delta BIC {db:.1f} "
-                f"against the best replicate's {floor['delta_bic']:.1f})")
+        return (f"fits no better than a replicate packing of the baseline or the bed made "
+                f"stiffer (Delta BIC {db:.1f} against the realisation floor's "
+                f"{floor['delta_bic']:.1f})")
     if sc - floor["score"] < CONFIRM_MIN_GAIN:
         return (f"Delta BIC {db:.1f}, but its score {sc:.3f} is not {CONFIRM_MIN_GAIN:g} above "
                 f"{floor['score']:.3f} (reference and replicates)")
