@@ -2176,6 +2176,25 @@ def test_the_layer_form_that_made_the_recording_is_the_one_kept(form):
     assert abs(h["parameters"]["interface_depth"] / 0.3 - 1.0) < 0.15, h["parameters"]
 
 
+def _diagnose_stiffer_below(depth: float):
+    """``screen_then_confirm`` on a recording of the bed with its grains 5 x stiffer below
+    ``depth`` [m] (stiffness form; the stand-in full model, 5 level beds, 4 replicates); every
+    run is counted."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    calls: list = []
+    p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
+        {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": depth,
+         "physics.soil_layering.lower_young_factor": 5.0}))
+    rec = acquire(p, np.random.default_rng(7))
+    rep = screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
+                              numerics=(), level_beds=5,
+                              replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)])
+    assert rep.simulations["full_simulations"] == len(calls)
+    return rep
+
+
 def test_a_stiffer_soil_is_not_named_a_layer():
     """A recording of the whole bed made stiffer (every grain's modulus x5: a wrong soil value,
     a recalibration) is not named ``soil_layering``, whose shallowest level (0.15 m, x5) comes
@@ -2183,9 +2202,7 @@ def test_a_stiffer_soil_is_not_named_a_layer():
     (``catalogue.stiffer_soil_overrides``) and an effect has to beat them as it beats the
     replicates (``fit.realisation.stiffer_soil``, counted in the full runs). A layer at 0.3 m is
     still named. Fails without the whole-bed runs (the layer at 0.15 m is named)."""
-    from crashdem import scenario as sc
     from crashdem.diagnosis.catalogue import DROP, WHOLE_BED_DEPTH, stiffer_soil_overrides
-    from crashdem.diagnosis.cli import rom_from_scenario
 
     lay = DROP.full_search["soil_layering"]
     ov = stiffer_soil_overrides(lay, 5.0)
@@ -2196,19 +2213,7 @@ def test_a_stiffer_soil_is_not_named_a_layer():
     assert stiffer_soil_overrides(lay.with_form("stiffness"), 2.0)[
         "physics.soil_layering.lower_young_factor"] == 2.0
 
-    def diagnose(depth):
-        calls: list = []
-        p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
-            {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": depth,
-             "physics.soil_layering.lower_young_factor": 5.0}))
-        rec = acquire(p, np.random.default_rng(7))
-        rep = screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
-                                  numerics=(), level_beds=5,
-                                  replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)])
-        assert rep.simulations["full_simulations"] == len(calls)
-        return rep
-
-    rep = diagnose(WHOLE_BED_DEPTH)
+    rep = _diagnose_stiffer_below(WHOLE_BED_DEPTH)
     assert rep.missing_physics is None, rep.decision
     stiff = rep.fit["realisation"]["stiffer_soil"]
     top = min(lay.values)
@@ -2220,7 +2225,7 @@ def test_a_stiffer_soil_is_not_named_a_layer():
         max(s["delta_bic_vs_reference"] for s in stiff))
     assert ("and the whole bed x2 / x5 stiffer and the bed below 0.15 m x2 / x5 stiffer"
             in rep.decision)
-    rep = diagnose(0.3)
+    rep = _diagnose_stiffer_below(0.3)
     assert rep.missing_physics == "soil_layering", rep.decision
 
 
@@ -2235,25 +2240,13 @@ def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor():
     where the screening model made the recording). The same bed stiffer below 0.2 m, a grain
     deeper, is still named a layer. Fails without the below-the-top-row runs (the floor is the
     whole bed's, below the 0.15 m level)."""
-    from crashdem import scenario as sc
     from crashdem.diagnosis.catalogue import DROP, WHOLE_BED_DEPTH, stiffer_soil_depths
-    from crashdem.diagnosis.cli import rom_from_scenario
 
     lay = DROP.full_search["soil_layering"]
     assert stiffer_soil_depths(lay) == (WHOLE_BED_DEPTH, 0.15)
     assert stiffer_soil_depths(None) == ()
 
-    def diagnose(depth):
-        calls: list = []
-        p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
-            {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": depth,
-             "physics.soil_layering.lower_young_factor": 5.0}))
-        rec = acquire(p, np.random.default_rng(7))
-        return screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
-                                   numerics=(), level_beds=5,
-                                   replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)])
-
-    rep = diagnose(0.15)
+    rep = _diagnose_stiffer_below(0.15)
     real = rep.fit["realisation"]
     below = [s for s in real["stiffer_soil"] if s["below_m"] == 0.15]
     assert [s["young_factor"] for s in below] == [2.0, 5.0] and all(
@@ -2268,7 +2261,7 @@ def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor():
     assert real["floor_delta_bic"] >= level["delta_bic_vs_reference"]
     whole = [s for s in real["stiffer_soil"] if s["form"] == "whole bed"]
     assert max(s["delta_bic_vs_reference"] for s in whole) < level["delta_bic_vs_reference"]
-    rep = diagnose(0.2)
+    rep = _diagnose_stiffer_below(0.2)
     assert rep.missing_physics == "soil_layering", rep.decision
     h = next(h for h in rep.hypotheses if h["name"] == "soil_layering")
     assert abs(h["parameters"]["interface_depth"] / 0.2 - 1.0) < 0.15, h["parameters"]
