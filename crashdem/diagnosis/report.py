@@ -327,9 +327,9 @@ def to_markdown(report, plots: list[str] | None = None,
         if real.get("stiffer_soil"):
             lines += ["", ("A stiffer soil is a recalibration, not missing physics: the floor "
                            "also holds the baseline's beds with the grains' modulus multiplied, "
-                           "in the whole bed and below its top grain row, whose stiffness "
-                           "against the confined grains a layer that shallow is not told apart "
-                           "from (the change averaged over the beds)."), "",
+                           "in the whole bed and below its top grain row (a layer that shallow "
+                           "is not told apart from how stiff the surface grains are against the "
+                           "confined ones; the change averaged over the beds)."), "",
                       "| grains | E factor | score | Delta BIC vs reference |",
                       "|---|---|---|---|"]
             for r in real["stiffer_soil"]:
