@@ -1441,8 +1441,7 @@ class _Confirmation:
             if self.stiff_rows:
                 rep.fit["realisation"]["stiffer_soil"] = [
                     {"young_factor": r["search_value"], "form": r.get("form", "whole bed"),
-                     "below_m": float(r["overrides"].get("physics.soil_layering.depth",
-                                                         catalogue.WHOLE_BED_DEPTH)),
+                     "below_m": _stiffer_below(r["overrides"]),
                      "score": r["score"] if math.isfinite(r["score"]) else None,
                      "delta_bic_vs_reference": r.get("delta_bic_vs_reference"),
                      "runs": _n_runs([r]), **({"error": r["error"]} if "error" in r else {})}
@@ -1994,10 +1993,16 @@ def _stiffer_text(stiff: Sequence[Mapping[str, Any]]) -> str:
                    + " / ".join(f"x{f:g}" for f in fs) + " stiffer" for form, fs in forms.items())
 
 
+def _stiffer_below(ov: Mapping[str, Any]) -> float:
+    """The depth [m] below which a stiffer-soil run (``stiffer_requests``) makes the grains
+    stiffer, from its overrides."""
+    return float(ov.get("physics.soil_layering.depth", catalogue.WHOLE_BED_DEPTH))
+
+
 def _stiffer_form(ov: Mapping[str, Any]) -> str:
-    """The form of a stiffer-soil run (``stiffer_requests``) from its overrides: "whole bed",
-    or "below D m" (the bed stiffer below its top grain row; its runs pool apart)."""
-    below = float(ov.get("physics.soil_layering.depth", catalogue.WHOLE_BED_DEPTH))
+    """The form of a stiffer-soil run from its overrides: "whole bed", or "below D m" (the bed
+    stiffer below its top grain row; its runs pool apart)."""
+    below = _stiffer_below(ov)
     return "whole bed" if below <= catalogue.WHOLE_BED_DEPTH else f"below {below:g} m"
 
 

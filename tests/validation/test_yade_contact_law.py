@@ -20,28 +20,13 @@ ROOT = Path(__file__).resolve().parents[2]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from tests.validation.test_diagnosis_yade_fixed import _cfg  # noqa: E402
 from validation.diagnosis_yade import cases  # noqa: E402
 
 pytestmark = pytest.mark.skipif(not cases.yade_available(), reason="yade is not installed")
 
 #: impact speeds [m/s]: slow enough that the grain (11 kg against 850 kg) follows quasi-statically
 SPEEDS = (0.1, 0.4)
-
-
-class _Handed(Exception):
-    pass
-
-
-def _truth_cfg(monkeypatch, tmp_path, law: str) -> dict:
-    """The configuration the null case of seed 21 hands Yade under ``law``."""
-    def intercept(cfg, cache):
-        raise _Handed(cfg)
-
-    with monkeypatch.context() as m:
-        m.setattr(cases, "run_yade", intercept)
-        with pytest.raises(_Handed) as got:
-            cases.yade_case(21, None, cache=tmp_path, contact_law=law)
-    return got.value.args[0]
 
 
 def _durations(cfg: dict, cache: Path, bed: Path) -> list[tuple[float, float, float]]:
@@ -65,9 +50,12 @@ def test_the_truths_contact_laws_impact_as_their_analytic_contacts(monkeypatch, 
     r = 0.1
     bed = tmp_path / "one_grain.npz"
     np.savez(bed, x=np.array([[0.0, 0.0, r]]), radius=np.array([r]))
-    lin_cfg = _truth_cfg(monkeypatch, tmp_path, "linear")
+    # the configurations the null case of seed 21 hands Yade under each law, then Yade itself
+    lin_cfg = _cfg(monkeypatch, tmp_path, 21, None, contact_law="linear")
+    hm_cfg = _cfg(monkeypatch, tmp_path, 21, None, contact_law="hertz_mindlin")
+    monkeypatch.undo()
     lin = _durations(lin_cfg, tmp_path, bed)
-    hm = _durations(_truth_cfg(monkeypatch, tmp_path, "hertz_mindlin"), tmp_path, bed)
+    hm = _durations(hm_cfg, tmp_path, bed)
     # linear: the duration does not depend on the speed; the peak force grows with it
     assert lin[1][0] / lin[0][0] == pytest.approx(1.0, abs=0.01)
     assert lin[1][2] / lin[0][2] == pytest.approx(4.0, rel=0.02)
