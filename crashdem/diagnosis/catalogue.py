@@ -25,6 +25,7 @@ from typing import Any, Callable, Mapping
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH",
            "STIFFER_SOIL_FACTORS", "DAMPING_FORMS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
+           "layer_level_factor",
            "stiffer_soil_depths",
            "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "Catalogue", "DROP", "drop_catalogue", "planar_catalogue",
@@ -392,6 +393,11 @@ class FullSearch:
     forms: tuple[tuple[str, dict[str, Any]], ...] = ()
     #: the form this search stands for (set by ``with_form``), None: ``fixed`` alone
     form: str | None = None
+    #: the depth [m] of the top grain row of the bed the levels run on: one mean grain
+    #: diameter of the simulator that runs them (set by the command line, which knows it:
+    #: the scenario's own grains, or the coarse search tier's); the realisation floor's bed
+    #: stiffer below its top grain row (``stiffer_soil_depths``). None: the shallowest level
+    top_row_depth: float | None = None
 
     def __post_init__(self) -> None:
         names = [f[0] for f in self.forms]
@@ -402,6 +408,10 @@ class FullSearch:
         if len(self.values) < 2 or any(b <= a for a, b in zip(self.values, self.values[1:])):
             raise ValueError(f"FullSearch.{self.parameter}.values={self.values!r}: must be at "
                              f"least two ascending values [{self.unit}]")
+        if self.top_row_depth is not None and not (math.isfinite(self.top_row_depth)
+                                                   and self.top_row_depth > 0.0):
+            raise ValueError(f"FullSearch.{self.parameter}.top_row_depth="
+                             f"{self.top_row_depth!r}: must be a finite depth > 0 [m] or None")
         if self.scale not in ("lin", "log") or (self.scale == "log" and self.values[0] <= 0):
             raise ValueError(f"FullSearch.{self.parameter}.scale={self.scale!r}: must be 'lin', "
                              f"or 'log' with positive values")
@@ -553,9 +563,10 @@ WHOLE_BED_DEPTH = 1e-3
 
 def stiffer_soil_depths(fs: FullSearch | None) -> tuple[float, ...]:
     """Depths [m] below which the realisation floor's stiffer-soil alternatives make the bed
-    stiffer: the whole bed (``WHOLE_BED_DEPTH``) and the bed below its top grain row, the
-    layering search's shallowest level (0.15 m: one grain diameter of the campaign's 0.075 m
-    grains). Empty when ``fs`` is None.
+    stiffer: the whole bed (``WHOLE_BED_DEPTH``) and the bed below its top grain row, one mean
+    grain diameter of the bed the levels run on (``FullSearch.top_row_depth``: 0.15 m for the
+    campaign's 0.075 m grains, 0.2 m on the coarse search tier's 0.10 m), else the layering
+    search's shallowest level (0.15 m). Empty when ``fs`` is None.
 
     The top row is the impactor's contact partner, and how stiff it is against the confined
     grains below is not one of the catalogue's physics: a contact law whose stiffness grows with
@@ -568,7 +579,8 @@ def stiffer_soil_depths(fs: FullSearch | None) -> tuple[float, ...]:
     both laws and at both heights measured (docs/diagnosis.md, "Another contact law")."""
     if fs is None:
         return ()
-    return (WHOLE_BED_DEPTH, float(min(fs.values)))
+    return (WHOLE_BED_DEPTH, float(min(fs.values) if fs.top_row_depth is None
+                                   else fs.top_row_depth))
 
 
 def stiffer_soil_overrides(fs: FullSearch | None, factor: float,
@@ -589,6 +601,18 @@ def stiffer_soil_overrides(fs: FullSearch | None, factor: float,
         return None
     return {**keys, **{k: float(below) for k in fs.keys},
             "physics.soil_layering.lower_young_factor": float(factor)}
+
+
+def layer_level_factor(fs: FullSearch | None) -> float | None:
+    """The modulus factor below the interface at which the stiffness form of the layering
+    search ``fs`` runs its levels (``physics.soil_layering.lower_young_factor``), or None when
+    ``fs`` is None or has no stiffness form: the stiffer-soil run of that factor
+    (``stiffer_soil_overrides``) is the level without its interface."""
+    if stiffer_soil_overrides(fs, 1.0) is None:
+        return None
+    f = {**fs.fixed, **dict(fs.forms).get("stiffness", {})}.get(
+        "physics.soil_layering.lower_young_factor")
+    return None if f is None else float(f)
 
 
 DROP_FULL_SEARCH: dict[str, FullSearch] = {

@@ -747,6 +747,16 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         else:
             unsearched.append(k)
     coarse = search_tier(scen)
+
+    def top_row(radius: Any) -> dict[str, Any]:
+        # the layering levels' bed's top grain row (the realisation floor's bed stiffer below
+        # it, catalogue.stiffer_soil_depths): one mean grain diameter of the simulator that
+        # runs the levels; an imported bed keeps the shallowest level
+        if "soil_layering" in searched and bed is None and radius:
+            searched["soil_layering"] = replace(searched["soil_layering"],
+                                                top_row_depth=2.0 * float(radius))
+        return searched
+
     note = ""
     if unsearched:
         why = ("the imported bed (soil.packing_file) has its own floor" if bed is not None
@@ -754,18 +764,20 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         note = f"; not searched: {', '.join(unsearched)} ({why})"
     itself, load = _search_on_itself(scen, mode)
     if itself and load is None:
-        return searched, None, f"{len(searched)} effects on the scenario itself{note}"
+        return (top_row(scen.get("soil.radius")), None,
+                f"{len(searched)} effects on the scenario itself{note}")
     if itself:
         what = (f"the imported bed: {bed_grains(scen):,.0f} grains" if bed is not None
                 else f"a small bed: about {bed_grains(scen):,.0f} grains")
-        return searched, None, (f"{len(searched)} effects on the scenario itself ({what}, load "
-                                f"{load:,.0f} <= {AUTO_FULL_LOAD:,}){note}")
+        return top_row(scen.get("soil.radius")), None, (
+            f"{len(searched)} effects on the scenario itself ({what}, load {load:,.0f} <= "
+            f"{AUTO_FULL_LOAD:,}){note}")
     search, tier = _tier_runner(scen, coarse, cmap, out / "search_runs", packing_cache,
                                 run_cache)
-    return searched, search, (f"{len(searched)} effects at the coarse resolution ({tier}), the "
-                              f"leading ones confirmed at the scenario's"
-                              + (" (the coarse tier on deposited beds: the imported bed is "
-                                 "the scenario's only)" if bed is not None else "") + note)
+    return top_row(coarse.get("soil.radius", scen.get("soil.radius"))), search, (
+        f"{len(searched)} effects at the coarse resolution ({tier}), the leading ones confirmed "
+        f"at the scenario's" + (" (the coarse tier on deposited beds: the imported bed is the "
+                                "scenario's only)" if bed is not None else "") + note)
 
 
 def grain_fit_tier(scen) -> dict[str, Any]:

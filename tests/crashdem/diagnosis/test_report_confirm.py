@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from crashdem.diagnosis import diagnose, screen_then_confirm, write_report
+from crashdem.diagnosis.catalogue import STIFFER_SOIL_FACTORS, WHOLE_BED_DEPTH
 from crashdem.diagnosis.generator import TRUTH_DT, acquire, concealed_case
 from crashdem.diagnosis.rom import SCALE_KEYS, RomParams, simulate
 
@@ -811,8 +812,10 @@ def test_a_standing_claim_with_a_rival_better_on_both_counts_is_not_named(layeri
 
 def test_replicates_run_on_the_search_simulator(layering_case):
     """With a search simulator the replicates run there, next to its baseline run, and set the
-    floor of the promotion; the concealed layering (far above a replicate, which here is the
-    baseline again: the ROM has no packing) is still named, and the full runs stay 1 + top_k."""
+    floor of the promotion, with the bed made stiffer; the concealed layering (far above a
+    replicate, which here is the baseline again: the ROM has no packing) is still named, and
+    the full runs stay 1 + top_k. Fails when the screening's claim is held to the stiffer-soil
+    runs on the search tier."""
     full_calls: list = []
     search_calls: list = []
     reps = [{"scenario.seed": s} for s in (2, 3, 4)]
@@ -830,7 +833,18 @@ def test_replicates_run_on_the_search_simulator(layering_case):
     assert rep.simulations["search_simulations"] == len(search_calls) - n_num
     rf = rep.fit["realisation"]
     assert rf["tier"] == "search simulator" and len(rf["runs"]) == 3
-    assert abs(rf["floor_delta_bic"]) < 1e-9  # the replicate is the search baseline itself
+    # the replicate is the search baseline itself
+    assert all(abs(r["delta_bic_vs_reference"]) < 1e-9 for r in rf["runs"])
+    # the floor there also holds the bed made stiffer (one bed each here); the screening's
+    # claim is held to the replicates' part of it (``_search_support``): the bed x2 stiffer
+    # below 0.15 m out-fits every x5 level of this x1.9 layer, and the claim stands
+    stiff = rf["stiffer_soil"]
+    assert [(s["form"], s["young_factor"], s["runs"]) for s in stiff] == [
+        ("whole bed", 2.0, 1), ("whole bed", 5.0, 1), ("below 0.15 m", 2.0, 1),
+        ("below 0.15 m", 5.0, 1)]
+    assert rf["floor_delta_bic"] == pytest.approx(
+        max(0.0, *(s["delta_bic_vs_reference"] for s in stiff)))
+    assert rf["floor_delta_bic"] > 50.0
     assert rep.missing_physics == "soil_layering", rep.decision
     verdicts = rep.fit["full_search"]["verdicts"]  # the search tier says what it promoted
     assert set(verdicts) <= set(rep.fit["full_search"]["best"])
@@ -1918,8 +1932,11 @@ def test_search_tier_is_never_finer_or_larger_than_the_scenario(tmp_path):
     smaller than 2 m keeps its own size (searched in a 2 m tank its walls would move away from
     the impact), coarser grains keep theirs, a narrower spread keeps its own; a box is
     clamped side by side. ``_search_setup`` runs the tier it describes, and a scenario the tier
-    would not change is searched on itself."""
+    would not change is searched on itself. The layering search carries the top grain row of
+    the bed its levels run on (one mean grain diameter of that simulator), where the
+    realisation floor makes the bed stiffer below its top row."""
     scenario = pytest.importorskip("crashdem.scenario")
+    from crashdem.diagnosis.catalogue import stiffer_soil_depths
     from crashdem.diagnosis.cli import SEARCH_COARSE, _search_setup, search_tier
     from crashdem.diagnosis.generator_dem import scenario_path
 
@@ -1951,15 +1968,26 @@ def test_search_tier_is_never_finer_or_larger_than_the_scenario(tmp_path):
         for k in ("container.diameter", "container.length", "container.width"):
             if k in got:
                 assert got[k] <= scen.get(k), (ov, k)
-        _, sim, how = _search_setup(scen, False, "coarse", {}, tmp_path / f"c{i}")
+        searched, sim, how = _search_setup(scen, False, "coarse", {}, tmp_path / f"c{i}")
         assert sim is not None
         for k, v in got.items():
             assert f"{k}={v:g}" in how, (ov, how)
-        _, sim, how = _search_setup(scen, False, "auto", {}, tmp_path / f"a{i}")
+        # the realisation floor's top grain row is the coarse bed's: one of its grain diameters
+        assert searched["soil_layering"].top_row_depth == pytest.approx(2 * got["soil.radius"])
+        assert stiffer_soil_depths(searched["soil_layering"])[1] == pytest.approx(
+            2 * got["soil.radius"])
+        searched, sim, how = _search_setup(scen, False, "auto", {}, tmp_path / f"a{i}")
         if auto == "coarse":
             assert sim is not None and "coarse" in how, (ov, how)
         elif auto == "itself":
             assert sim is None and how.endswith("on the scenario itself"), (ov, how)
+            assert searched["soil_layering"].top_row_depth == pytest.approx(
+                2 * scen.get("soil.radius"))
+    searched, sim, _ = _search_setup(campaign, False, "full", {}, tmp_path / "f")
+    assert sim is None and searched["soil_layering"].top_row_depth == 0.15
+    assert stiffer_soil_depths(searched["soil_layering"]) == (WHOLE_BED_DEPTH, 0.15)
+    with pytest.raises(ValueError, match="top_row_depth=0.0: must be a finite depth > 0"):
+        replace(searched["soil_layering"], top_row_depth=0.0)
 
 
 @pytest.mark.parametrize("truth, runs, named", [(0.43, [0.5, 0.4], 0.4),
@@ -2176,33 +2204,49 @@ def test_the_layer_form_that_made_the_recording_is_the_one_kept(form):
     assert abs(h["parameters"]["interface_depth"] / 0.3 - 1.0) < 0.15, h["parameters"]
 
 
-def _diagnose_stiffer_below(depth: float):
+def _diagnose_stiffer_below(depth: float, tiered: bool = False):
     """``screen_then_confirm`` on a recording of the bed with its grains 5 x stiffer below
-    ``depth`` [m] (stiffness form; the stand-in full model, 5 level beds, 4 replicates); every
-    run is counted."""
+    ``depth`` [m] (stiffness form; the stand-in full model, 5 level beds, 4 replicates; with
+    ``tiered`` the search, the replicates and the realisation floor on a separate search
+    simulator); every run is counted, each distinct run once (the floor's bed x5 stiffer below
+    0.15 m is the search's own 0.15 m x5 level, run once)."""
     from crashdem import scenario as sc
     from crashdem.diagnosis.cli import rom_from_scenario
 
     calls: list = []
+    search_calls: list = []
     p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(
         {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": depth,
          "physics.soil_layering.lower_young_factor": 5.0}))
     rec = acquire(p, np.random.default_rng(7))
+    kw = {"search_simulator": _form_simulator(search_calls)} if tiered else {}
     rep = screen_then_confirm(simulate(RomParams()), rec, _form_simulator(calls), top_k=2,
                               numerics=(), level_beds=5,
-                              replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)])
+                              replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)], **kw)
+    for c in (calls, search_calls):
+        assert len({json.dumps(ov, sort_keys=True) for ov in c}) == len(c)
     assert rep.simulations["full_simulations"] == len(calls)
+    if tiered:
+        assert rep.simulations["search_simulations"] == len(search_calls)
+        assert len(calls) <= 1 + 2 and rep.fit["realisation"]["tier"] == "search simulator"
+        assert not any(ov.get("physics.soil_layering.depth") == WHOLE_BED_DEPTH for ov in calls)
     return rep
 
 
-def test_a_stiffer_soil_is_not_named_a_layer():
+@pytest.mark.parametrize("tiered", [False, True], ids=["one tier", "search tier"])
+def test_a_stiffer_soil_is_not_named_a_layer(tiered):
     """A recording of the whole bed made stiffer (every grain's modulus x5: a wrong soil value,
     a recalibration) is not named ``soil_layering``, whose shallowest level (0.15 m, x5) comes
     close to it: the full tier runs the whole bed x2 and x5 stiffer on the level beds
     (``catalogue.stiffer_soil_overrides``) and an effect has to beat them as it beats the
     replicates (``fit.realisation.stiffer_soil``, counted in the full runs). A layer at 0.3 m is
-    still named. Fails without the whole-bed runs (the layer at 0.15 m is named)."""
-    from crashdem.diagnosis.catalogue import DROP, WHOLE_BED_DEPTH, stiffer_soil_overrides
+    still named. On a two-tier confirmation the runs are the search tier's, beside its
+    replicates, and set the floor its levels are promoted against; the screening's claim (a
+    layer, here) is held there to the replicates and the bed made as stiff as the layer levels
+    (x5: ``layer_level_factor``), which its best level fits decisively worse than. Fails
+    without the whole-bed runs (the layer at 0.15 m is named), and on two tiers without them
+    in the claim's floor (the claim, whose full run has only the reference to beat, is named)."""
+    from crashdem.diagnosis.catalogue import DROP, layer_level_factor, stiffer_soil_overrides
 
     lay = DROP.full_search["soil_layering"]
     ov = stiffer_soil_overrides(lay, 5.0)
@@ -2213,8 +2257,13 @@ def test_a_stiffer_soil_is_not_named_a_layer():
     assert stiffer_soil_overrides(lay.with_form("stiffness"), 2.0)[
         "physics.soil_layering.lower_young_factor"] == 2.0
 
-    rep = _diagnose_stiffer_below(WHOLE_BED_DEPTH)
+    assert layer_level_factor(lay) == 5.0 == max(STIFFER_SOIL_FACTORS)
+    assert layer_level_factor(lay.with_form("compacted")) is None is layer_level_factor(None)
+    rep = _diagnose_stiffer_below(WHOLE_BED_DEPTH, tiered)
     assert rep.missing_physics is None, rep.decision
+    if tiered:
+        assert ("worse than the best replicate packing there or the bed made as stiff as its "
+                "levels" in rep.fit["confirmation_verdicts"]["soil_layering"])
     stiff = rep.fit["realisation"]["stiffer_soil"]
     top = min(lay.values)
     assert [(s["form"], s["young_factor"], s["below_m"]) for s in stiff] == [
@@ -2225,11 +2274,12 @@ def test_a_stiffer_soil_is_not_named_a_layer():
         max(s["delta_bic_vs_reference"] for s in stiff))
     assert ("and the whole bed x2 / x5 stiffer and the bed below 0.15 m x2 / x5 stiffer"
             in rep.decision)
-    rep = _diagnose_stiffer_below(0.3)
+    rep = _diagnose_stiffer_below(0.3, tiered)
     assert rep.missing_physics == "soil_layering", rep.decision
 
 
-def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor():
+@pytest.mark.parametrize("tiered", [False, True], ids=["one tier", "search tier"])
+def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor(tiered):
     """The floor holds the bed made 2 x and 5 x stiffer below its top grain row, the
     stiffness-form layer at the search's shallowest level (0.15 m: one diameter of the
     campaign's grains; ``catalogue.stiffer_soil_depths``): how stiff the surface row is against
@@ -2238,15 +2288,16 @@ def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor():
     floor, so the search cannot name it (on the Yade recordings every such name came from the
     search; a claim of the screening model is held to the floor as before, and stands here,
     where the screening model made the recording). The same bed stiffer below 0.2 m, a grain
-    deeper, is still named a layer. Fails without the below-the-top-row runs (the floor is the
-    whole bed's, below the 0.15 m level)."""
-    from crashdem.diagnosis.catalogue import DROP, WHOLE_BED_DEPTH, stiffer_soil_depths
+    deeper, is still named a layer. The same on a two-tier confirmation, where the floor is the
+    search tier's. Fails without the below-the-top-row runs (the floor is the whole bed's, below
+    the 0.15 m level)."""
+    from crashdem.diagnosis.catalogue import DROP, stiffer_soil_depths
 
     lay = DROP.full_search["soil_layering"]
     assert stiffer_soil_depths(lay) == (WHOLE_BED_DEPTH, 0.15)
     assert stiffer_soil_depths(None) == ()
 
-    rep = _diagnose_stiffer_below(0.15)
+    rep = _diagnose_stiffer_below(0.15, tiered)
     real = rep.fit["realisation"]
     below = [s for s in real["stiffer_soil"] if s["below_m"] == 0.15]
     assert [s["young_factor"] for s in below] == [2.0, 5.0] and all(
@@ -2261,7 +2312,7 @@ def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor():
     assert real["floor_delta_bic"] >= level["delta_bic_vs_reference"]
     whole = [s for s in real["stiffer_soil"] if s["form"] == "whole bed"]
     assert max(s["delta_bic_vs_reference"] for s in whole) < level["delta_bic_vs_reference"]
-    rep = _diagnose_stiffer_below(0.2)
+    rep = _diagnose_stiffer_below(0.2, tiered)
     assert rep.missing_physics == "soil_layering", rep.decision
     h = next(h for h in rep.hypotheses if h["name"] == "soil_layering")
     assert abs(h["parameters"]["interface_depth"] / 0.2 - 1.0) < 0.15, h["parameters"]
