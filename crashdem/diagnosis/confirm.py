@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from types import MappingProxyType
 from typing import Any, Callable, Iterable, Mapping, Sequence
 
@@ -536,6 +536,12 @@ def _scaled_pass(factor: float, recording_signals: Mapping[str, Signal],
     full = _GrainScaled(full_simulator, factor)
     search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
     kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
+    if isinstance(kw.get("full_search"), Mapping):
+        # the top grain row of the levels' bed (the floor's bed stiffer below it) is one grain
+        # diameter: it scales with the grains
+        kw["full_search"] = {k: replace(fs, top_row_depth=fs.top_row_depth * float(factor))
+                             if fs.top_row_depth is not None else fs
+                             for k, fs in kw["full_search"].items()}
     return _confirm_pass(full({}), recording_signals, full, search, **kw), full, search
 
 

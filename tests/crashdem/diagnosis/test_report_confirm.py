@@ -2278,6 +2278,27 @@ def test_a_stiffer_soil_is_not_named_a_layer(tiered):
     assert rep.missing_physics == "soil_layering", rep.decision
 
 
+def test_a_grain_factor_scales_the_top_grain_row(monkeypatch):
+    """The grain check and the grain fit make the confirmation again with every grain radius
+    times a factor: the top grain row of the levels' bed (``FullSearch.top_row_depth``, where
+    the floor makes the bed stiffer below) is one grain diameter, so it scales with them; a
+    search without it (the shallowest level) and the other effects are passed on as they are."""
+    from crashdem.diagnosis import confirm
+    from crashdem.diagnosis.catalogue import DROP
+
+    seen: dict = {}
+    monkeypatch.setattr(confirm, "_confirm_pass",
+                        lambda base, rec, full, search, **kw: seen.update(kw))
+    lay = replace(DROP.full_search["soil_layering"], top_row_depth=0.15)
+    fs = {"soil_layering": lay, "cohesion": DROP.full_search["cohesion"]}
+    confirm._scaled_pass(1.25, {}, lambda ov: {}, None, full_search=fs)
+    assert seen["full_search"]["soil_layering"].top_row_depth == pytest.approx(0.1875)
+    assert seen["full_search"]["cohesion"] is fs["cohesion"]
+    assert fs["soil_layering"].top_row_depth == 0.15  # the caller's search is not changed
+    confirm._scaled_pass(0.8, {}, lambda ov: {}, None, full_search=dict(DROP.full_search))
+    assert seen["full_search"]["soil_layering"].top_row_depth is None
+
+
 @pytest.mark.parametrize("tiered", [False, True], ids=["one tier", "search tier"])
 def test_a_bed_stiffer_below_its_top_grain_row_is_in_the_realisation_floor(tiered):
     """The floor holds the bed made 2 x and 5 x stiffer below its top grain row, the
