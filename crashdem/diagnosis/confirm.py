@@ -578,6 +578,8 @@ class _SearchTier:
     #: the floor a screened claim is held to there (``_search_support``): the replicates and
     #: the stiffer-soil runs at the layer levels' own modulus factor only; None: ``floor``
     claim_floor: dict[str, float] | None = None
+    #: the stiffer-soil runs raised ``claim_floor`` above the replicates' (the verdict's words)
+    claim_floor_stiffer: bool = False
 
 
 @dataclass
@@ -1135,6 +1137,7 @@ class _Confirmation:
         floor = _realisation_floor(rows, float(rep.fit["before"]["overall"]), stiff_rows)
         claim_floor = _realisation_floor(rows, float(rep.fit["before"]["overall"]),
                                          [r for r in stiff_rows if r["search_value"] == own_factor])
+        raised = claim_floor != _realisation_floor(rows, float(rep.fit["before"]["overall"]))
         best = self.standing(rows[1:], floor)
         promote = sorted((r for r in best.values() if _decisive(r, floor)),
                          key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
@@ -1152,7 +1155,7 @@ class _Confirmation:
                 verdicts[n] = "not promoted: " + self._beyond_verdict(n, end, own, floor)
         return _SearchTier(rows, floor,
                            [(r["hypothesis"], dict(r["overrides"]), r["search_value"])
-                            for r in promote], candidates, verdicts, best, claim_floor)
+                            for r in promote], candidates, verdicts, best, claim_floor, raised)
 
     def full_tier(self, sim: Simulator, tier: _SearchTier | None) -> _FullTier:
         """The full runs: recalibration, candidates, promoted levels, or (without a search
@@ -1412,10 +1415,7 @@ class _Confirmation:
                                       "no level of it ran on the search simulator"))
         if _not_decisively_worse(run, f):
             return None
-        replicates = _realisation_floor(tier.rows, float(self.rep.fit["before"]["overall"]))
-        stiff = ("" if (f["delta_bic"], f["score"]) == (replicates["delta_bic"],
-                                                        replicates["score"])
-                 else " or the bed made as stiff as its levels")
+        stiff = " or the bed made as stiff as its levels" if tier.claim_floor_stiffer else ""
         return (f"{who}, but on the search simulator its best level "
                 f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC "
                 f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively "
