@@ -590,17 +590,22 @@ def stiffer_soil_overrides(fs: FullSearch | None, factor: float,
     layering search ``fs`` (``LAYER_FORMS``; its own form when it is searched in that form
     alone) at that depth. None when ``fs`` is None or has no stiffness form (then the bed
     cannot be made stiffer without depositing it again)."""
+    keys = _stiffness_form_keys(fs)
+    if fs is None or keys is None:
+        return None
+    return {**keys, **{k: float(below) for k in fs.keys},
+            "physics.soil_layering.lower_young_factor": float(factor)}
+
+
+def _stiffness_form_keys(fs: FullSearch | None) -> dict[str, Any] | None:
+    """The fixed overrides of the stiffness form of the layering search ``fs`` (its own form
+    when it is searched in that form alone), or None when ``fs`` is None or has no such form."""
     if fs is None:
         return None
     forms = dict(fs.forms)
     if "stiffness" in forms:
-        keys = {**fs.fixed, **forms["stiffness"]}
-    elif fs.form == "stiffness":
-        keys = dict(fs.fixed)
-    else:
-        return None
-    return {**keys, **{k: float(below) for k in fs.keys},
-            "physics.soil_layering.lower_young_factor": float(factor)}
+        return {**fs.fixed, **forms["stiffness"]}
+    return dict(fs.fixed) if fs.form == "stiffness" else None
 
 
 def layer_level_factor(fs: FullSearch | None) -> float | None:
@@ -608,10 +613,8 @@ def layer_level_factor(fs: FullSearch | None) -> float | None:
     search ``fs`` runs its levels (``physics.soil_layering.lower_young_factor``), or None when
     ``fs`` is None or has no stiffness form: the stiffer-soil run of that factor
     (``stiffer_soil_overrides``) is the level without its interface."""
-    if stiffer_soil_overrides(fs, 1.0) is None:
-        return None
-    f = {**fs.fixed, **dict(fs.forms).get("stiffness", {})}.get(
-        "physics.soil_layering.lower_young_factor")
+    keys = _stiffness_form_keys(fs)
+    f = None if keys is None else keys.get("physics.soil_layering.lower_young_factor")
     return None if f is None else float(f)
 
 

@@ -1134,10 +1134,11 @@ class _Confirmation:
         for r in stiff_rows:
             qualify(r)
         self.stiff_rows = stiff_rows
-        floor = _realisation_floor(rows, float(rep.fit["before"]["overall"]), stiff_rows)
-        claim_floor = _realisation_floor(rows, float(rep.fit["before"]["overall"]),
+        before = float(rep.fit["before"]["overall"])
+        floor = _realisation_floor(rows, before, stiff_rows)
+        claim_floor = _realisation_floor(rows, before,
                                          [r for r in stiff_rows if r["search_value"] == own_factor])
-        raised = claim_floor != _realisation_floor(rows, float(rep.fit["before"]["overall"]))
+        raised = claim_floor != _realisation_floor(rows, before)
         best = self.standing(rows[1:], floor)
         promote = sorted((r for r in best.values() if _decisive(r, floor)),
                          key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
