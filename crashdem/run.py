@@ -72,6 +72,14 @@ def _deg(x: float) -> float:
     return math.radians(x)
 
 
+def _law(scen: Scenario) -> dict[str, Any]:
+    """The impact phase's contact law as ``soil.Material`` fields ({} for the linear law, so
+    that a linear scenario's materials stay as they were)."""
+    if scen["soil.contact_law"] == "linear":
+        return {}
+    return {"contact_law": scen["soil.contact_law"], "poisson": scen["soil.poisson"]}
+
+
 def soil_material(scen: Scenario, lower: bool = False):
     """The soil material of the upper (re-worked) or lower (compacted) layer."""
     import soil
@@ -189,14 +197,15 @@ def impact_materials(scen: Scenario, packing) -> list:
             kw["dashpot_tension"] = bool(scen["physics.contact_damping.tension"])
         if e is not None:
             kw["restitution"] = e
+        kw.update(_law(scen))
         mats.append(replace(m, **kw) if kw else m)
     wall_e = scen["container.wall_young"]
     if scen["physics.boundary_proximity.enabled"] and scen["physics.boundary_proximity.wall_young"] is not None:
         wall_e = scen["physics.boundary_proximity.wall_young"]
     base = packing.materials[0]
-    mats.append(replace(base, young=wall_e or base.young, name="wall"))
+    mats.append(replace(base, young=wall_e or base.young, name="wall", **_law(scen)))
     mats.append(replace(base, young=scen["impactor.material_young"], friction_angle=0.0,
-                        name="impactor"))  # thesis §3.1: impactor friction taken as null
+                        name="impactor", **_law(scen)))  # thesis §3.1: impactor friction null
     return mats
 
 

@@ -173,6 +173,8 @@ SCHEMA: dict[str, Any] = {
         "deposition_friction_deg": F(None, "deg", 0, 90, hi_open=True, doc="friction during deposition (null = material value)", nullable=True),
         "material": dict(MATERIAL),
         "restitution": F(None, "1", 0, 1, lo_open=True, doc="viscous normal damping from a restitution coefficient (null = off, thesis)", nullable=True),
+        "contact_law": C("linear", "linear", "hertz_mindlin", doc="contact law of the impact phase: linear Cundall-Strack springs kn = E r, ks = stiffness_ratio kn (thesis, Yade's FrictPhys), or Hertz-Mindlin (Fn = 4/3 E* sqrt(R*) delta^1.5, ks = 8 G* sqrt(R* delta), Yade's MindlinPhys) for the grains, the walls and the impactor; the bed is deposited with the linear law either way (soil.Material.contact_law)"),
+        "poisson": F(0.25, "1", 0, 0.5, hi_open=True, doc="Poisson's ratio of the grains, walls and impactor with contact_law = hertz_mindlin (unused by the linear law)"),
         "packing_file": S("", doc="bed imported instead of deposited (drop tests): .npz with x (N,3) and radius (N,) [m], or text rows 'x y z r' [m] (Yade export.text); floor at z = 0, tank on the z axis; empty = deposit (crashdem.beds)"),
     },
     "container": {

@@ -19,8 +19,12 @@ from soil.contact_laws import (
     coulomb_cap,
     cohesive_normal_force,
     cohesive_shear_cap,
+    LAW_HERTZ_MINDLIN,
     damping_coefficient,
     damping_ratio,
+    hertz_coefficients,
+    hertz_damping_coefficient,
+    hertz_normal_dissipation,
     linear_normal_force,
     normal_dissipation,
     moment_cap,
@@ -29,11 +33,12 @@ from soil.contact_laws import (
     rotate_shear,
     shear_stiffness,
     spring_dissipation,
+    varying_spring_dissipation,
 )
 
 #: digest of the jitted sources compiled into these kernels (Numba's disk cache is per file;
 #: tests/test_numba_cache_deps.py names the new value when one of them changes)
-NUMBA_CACHE_DEPENDS = "a5ca02d81124c25a"
+NUMBA_CACHE_DEPENDS = "b43a798ee4cde0ad"
 
 jit = functools.partial(numba.njit, cache=True)
 
@@ -77,14 +82,17 @@ M_MOMENTS = 12
 M_MU_R = 13  # < 0 = no rolling resistance
 M_DENSITY = 14
 M_TENSION = 15  # > 0: the normal dashpot may pull while the contact opens
-M_NCOL = 16
+M_LAW = 16  # contact_laws.LAW_LINEAR / LAW_HERTZ_MINDLIN
+M_POISSON = 17  # Poisson's ratio (Hertz-Mindlin)
+M_NCOL = 18
 
 # pair state flags
 BOND_NONE = 0
 BOND_ACTIVE = 1
 
-# boundary contact history columns: Fs[3], n[3], fn, kn, ks, M_roll[3], kr
-B_NCOL = 13
+# boundary contact history columns: Fs[3], n[3], fn, kn, ks, M_roll[3], kr, normal elastic
+# energy (kn: the tangent normal stiffness, for the time step)
+B_NCOL = 14
 
 # boundary element types
 E_PLANE = 0
@@ -512,6 +520,8 @@ H_UNP = 9  # plastic normal displacement [m]
 H_MB = 10  # 10..12 bending / rolling moment on j [N m]
 H_MT = 13  # 13..15 twisting moment on j [N m]
 H_NCOL_FULL = 16
+H_DN = 16  # overlap of the last step [m] (Hertz-Mindlin: the stiffness the spring was made with)
+H_NCOL_HERTZ = 17
 # per-pair int history columns
 I_BOND = 0
 
@@ -600,16 +610,36 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                 delta = rs - dist
                 mj = mat_id[j]
                 ej = mat[mj, M_YOUNG]
-                kn = normal_stiffness(ei, ri, ej, rj)
-                ks = shear_stiffness(ei, ri, nui, ej, rj, mat[mj, M_RATIO])
-                tan_phi = min(tpi, mat[mj, M_TANPHI])
                 n0x = hf[k, H_N]
                 n0y = hf[k, H_N + 1]
                 n0z = hf[k, H_N + 2]
-                if n0x == 0.0 and n0y == 0.0 and n0z == 0.0:
+                fresh = n0x == 0.0 and n0y == 0.0 and n0z == 0.0
+                if fresh:
                     n0x = nx
                     n0y = ny
                     n0z = nz
+                # a bond is the cohesive law's linear springs; a contact without one is Hertz's
+                hertz_pair = (mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
+                              or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN)
+                hertz = hertz_pair and not bonded
+                kno = 0.0
+                sd = 0.0
+                d_old = delta
+                if hertz:
+                    # delta > 0: an unbonded pair apart was skipped above
+                    kno, kso = hertz_coefficients(ei, mat[mi, M_POISSON], ej, mat[mj, M_POISSON],
+                                                  ri * rj / (ri + rj))
+                    sd = math.sqrt(delta)
+                    kn = 1.5 * kno * sd  # tangent normal stiffness
+                    ks = kso * sd
+                    if not fresh:
+                        d_old = hf[k, H_DN]
+                    ks_old = kso * math.sqrt(d_old)
+                else:
+                    kn = normal_stiffness(ei, ri, ej, rj)
+                    ks = shear_stiffness(ei, ri, nui, ej, rj, mat[mj, M_RATIO])
+                    ks_old = ks
+                tan_phi = min(tpi, mat[mj, M_TANPHI])
                 # relative velocity of j w.r.t. i at the contact point
                 vrx = v[j, 0] - v[i, 0]
                 vry = v[j, 1] - v[i, 1]
@@ -630,6 +660,12 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                 delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
                     vrx, vry, vrz, nx, ny, nz, hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
                     n0x, n0y, n0z, twist, ks, dt)
+                if ks < ks_old:
+                    # Thornton's unloading rule: the stored force follows the softer spring
+                    sc = ks / ks_old - 1.0
+                    fsx += sc * ox
+                    fsy += sc * oy
+                    fsz += sc * oz
                 if bonded:
                     an = hf[k, H_AN]
                     at = hf[k, H_AT]
@@ -663,6 +699,9 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         # bond gone and spheres apart: the contact no longer exists
                         _clear_pair(hf, tq, k, has_rot)
                         continue
+                    if hertz_pair:
+                        # the overlap a Hertz contact starts from if the bond breaks
+                        hf[k, H_DN] = delta if delta > 0.0 else 0.0
                 else:
                     cn = 0.0
                     pulls = False
@@ -670,14 +709,30 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         e_pair = min(mat[mi, M_RESTITUTION], mat[mj, M_RESTITUTION])
                         if e_pair < 1.0:
                             m_eff = mass[i] * mass[j] / (mass[i] + mass[j])
-                            cn = damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                            if hertz:
+                                cn = hertz_damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                            else:
+                                cn = damping_coefficient(damping_ratio(e_pair), m_eff, kn)
                             pulls = mat[mi, M_TENSION] > 0.0 or mat[mj, M_TENSION] > 0.0
                     fn_old = hf[k, H_FN]
-                    fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
-                    if cn > 0.0:
-                        visc_acc += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
+                    if hertz:
+                        # secant stiffness k_no sqrt(delta): the elastic force k_no delta^1.5
+                        fn, f_visc = linear_normal_force(kno * sd, delta, cn, delta_dot, pulls)
+                        if cn > 0.0:
+                            d_prev = delta - delta_dot * dt if fresh else d_old
+                            visc_acc += hertz_normal_dissipation(fn_old, fn, delta, d_prev, kno)
+                        hf[k, H_DN] = delta
+                    else:
+                        fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
+                        if cn > 0.0:
+                            visc_acc += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
                     fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
-                    fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
+                    if hertz:
+                        fric_acc += varying_spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux,
+                                                               duy, duz, ks_old, ks)
+                    else:
+                        fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,
+                                                       ks)
                 hf[k, H_FS] = fsx
                 hf[k, H_FS + 1] = fsy
                 hf[k, H_FS + 2] = fsz
@@ -755,14 +810,27 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                                 mu_r = mu_rj
                             r_eff = ri * rj / (ri + rj)
                             kr = rolling_stiffness(kn, mu_r, r_eff)
+                            kr_old = kr
+                            if hertz:
+                                kr_old = rolling_stiffness(1.5 * kno * math.sqrt(d_old), mu_r,
+                                                           r_eff)
                             mbx = mox - kr * dtx
                             mby = moy - kr * dty
                             mbz = moz - kr * dtz
+                            if kr < kr_old:
+                                sc = kr / kr_old - 1.0
+                                mbx += sc * mox
+                                mby += sc * moy
+                                mbz += sc * moz
                             if kr > 0.0:
                                 mbx, mby, mbz, _d = moment_cap(mbx, mby, mbz,
                                                                mu_r * r_eff * abs(fn), kr)
-                                fric_acc += spring_dissipation(mox, moy, moz, mbx, mby, mbz,
-                                                               dtx, dty, dtz, kr)
+                                if hertz:
+                                    fric_acc += varying_spring_dissipation(
+                                        mox, moy, moz, mbx, mby, mbz, dtx, dty, dtz, kr_old, kr)
+                                else:
+                                    fric_acc += spring_dissipation(mox, moy, moz, mbx, mby, mbz,
+                                                                   dtx, dty, dtz, kr)
                             mx = mbx
                             my = mby
                             mz = mbz
@@ -922,7 +990,7 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                     has_visc, has_roll):
     """Forces of boundary contacts (sorted by key), history carried by key (particle, element).
 
-    ``new_hist[c]`` = (Fs[3], n[3], fn, kn, ks, M_roll[3], kr). Adds forces/torques to
+    ``new_hist[c]`` = (Fs[3], n[3], fn, kn, ks, M_roll[3], kr, E_n). Adds forces/torques to
     particles, the wrench (about the body's reference point) and power to bodies, dissipation
     to ``b_diss[body]`` (friction, viscous).
 
@@ -951,7 +1019,8 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
         nx = c_n[c, 0]
         ny = c_n[c, 1]
         nz = c_n[c, 2]
-        if lo < n_old and old_key[lo] == key:
+        known = lo < n_old and old_key[lo] == key
+        if known:
             fsx0 = old_hist[lo, 0]
             fsy0 = old_hist[lo, 1]
             fsz0 = old_hist[lo, 2]
@@ -977,9 +1046,27 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             rw = 2.0 * ri
         else:
             rw = ri
-        kn = normal_stiffness(mat[mb, M_YOUNG], rw, mat[mi, M_YOUNG], ri)
-        ks = shear_stiffness(mat[mb, M_YOUNG], rw, mat[mb, M_RATIO], mat[mi, M_YOUNG], ri,
-                             mat[mi, M_RATIO])
+        hertz = mat[mb, M_LAW] == LAW_HERTZ_MINDLIN or mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
+        kno = 0.0
+        sd = 0.0
+        d_old = delta
+        if hertz:
+            # R* of the sphere on a plane, a cylinder's inside or a facet: its own radius
+            r_eff = ri * er[e] / (ri + er[e]) if ty == E_SPHERE else ri
+            kno, kso = hertz_coefficients(mat[mb, M_YOUNG], mat[mb, M_POISSON], mat[mi, M_YOUNG],
+                                          mat[mi, M_POISSON], r_eff)
+            sd = math.sqrt(delta)
+            kn = 1.5 * kno * sd
+            ks = kso * sd
+            ks_old = ks
+            if known:
+                ks_old = old_hist[lo, 8]
+                d_old = (ks_old / kso) ** 2
+        else:
+            kn = normal_stiffness(mat[mb, M_YOUNG], rw, mat[mi, M_YOUNG], ri)
+            ks = shear_stiffness(mat[mb, M_YOUNG], rw, mat[mb, M_RATIO], mat[mi, M_YOUNG], ri,
+                                 mat[mi, M_RATIO])
+            ks_old = ks
         tan_phi = min(mat[mb, M_TANPHI], mat[mi, M_TANPHI])
         px = c_pt[c, 0]
         py = c_pt[c, 1]
@@ -1007,27 +1094,48 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                                 + nz * (w[i, 2] + b_omg[b, 2]))
         delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
             vrx, vry, vrz, nx, ny, nz, fsx0, fsy0, fsz0, n0x, n0y, n0z, twist, ks, dt)
+        if ks < ks_old:
+            # Thornton's unloading rule (see pair_forces)
+            sc = ks / ks_old - 1.0
+            fsx += sc * ox
+            fsy += sc * oy
+            fsz += sc * oz
         cn = 0.0
         pulls = False
         if has_visc:
             e_pair = min(mat[mb, M_RESTITUTION], mat[mi, M_RESTITUTION])
             if e_pair < 1.0:
-                cn = damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+                if hertz:
+                    cn = hertz_damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+                else:
+                    cn = damping_coefficient(damping_ratio(e_pair), mass[i], kn)
                 pulls = mat[mb, M_TENSION] > 0.0 or mat[mi, M_TENSION] > 0.0
         fn_old = 0.0
         mox = 0.0
         moy = 0.0
         moz = 0.0
-        if lo < n_old and old_key[lo] == key:
+        kr_old = -1.0
+        if known:
             fn_old = old_hist[lo, 6]
             mox = old_hist[lo, 9]
             moy = old_hist[lo, 10]
             moz = old_hist[lo, 11]
-        fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
+            kr_old = old_hist[lo, 12]
+        if hertz:
+            fn, f_visc = linear_normal_force(kno * sd, delta, cn, delta_dot, pulls)
+        else:
+            fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
         fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
-        b_diss[b, 0] += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
-        if cn > 0.0:
-            b_diss[b, 1] += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
+        if hertz:
+            b_diss[b, 0] += varying_spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,
+                                                       ks_old, ks)
+            if cn > 0.0:
+                d_prev = d_old if known else delta - delta_dot * dt
+                b_diss[b, 1] += hertz_normal_dissipation(fn_old, fn, delta, d_prev, kno)
+        else:
+            b_diss[b, 0] += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz, ks)
+            if cn > 0.0:
+                b_diss[b, 1] += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
         new_hist[c, 0] = fsx
         new_hist[c, 1] = fsy
         new_hist[c, 2] = fsz
@@ -1061,14 +1169,29 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                 mrx = rox - kr * dtx
                 mry = roy - kr * dty
                 mrz = roz - kr * dtz
+                if not hertz or kr_old < 0.0:
+                    kr_old = kr
+                if kr < kr_old:
+                    sc = kr / kr_old - 1.0
+                    mrx += sc * rox
+                    mry += sc * roy
+                    mrz += sc * roz
                 if kr > 0.0:
                     mrx, mry, mrz, _d = moment_cap(mrx, mry, mrz, mu_r * r_eff * abs(fn), kr)
-                    b_diss[b, 0] += spring_dissipation(rox, roy, roz, mrx, mry, mrz, dtx, dty,
-                                                       dtz, kr)
+                    if hertz:
+                        b_diss[b, 0] += varying_spring_dissipation(rox, roy, roz, mrx, mry, mrz,
+                                                                   dtx, dty, dtz, kr_old, kr)
+                    else:
+                        b_diss[b, 0] += spring_dissipation(rox, roy, roz, mrx, mry, mrz, dtx,
+                                                           dty, dtz, kr)
         new_hist[c, 9] = mrx
         new_hist[c, 10] = mry
         new_hist[c, 11] = mrz
         new_hist[c, 12] = kr
+        if hertz:
+            new_hist[c, 13] = 0.4 * kno * delta * delta * sd
+        else:
+            new_hist[c, 13] = 0.5 * kn * delta * delta
         fx = fn * nx + fsx
         fy = fn * ny + fsy
         fz = fn * nz + fsz
@@ -1102,7 +1225,8 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
     Notes
     -----
     Linear springs: kn delta^2 / 2 (bonds: kn (delta - u_p)^2 / 2), |Fs|^2 / (2 ks),
-    |M|^2 / (2 k_M).
+    |M|^2 / (2 k_M). Hertz-Mindlin pairs: 2/5 k_no delta^(5/2), and the shear and rolling
+    springs over the stiffness of the overlap they were last made at (``H_DN``).
     """
     n = x.shape[0]
     e_n = 0.0
@@ -1121,15 +1245,28 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
             dy = x[j, 1] - x[i, 1]
             dz = x[j, 2] - x[i, 2]
             delta = ri + rj - math.sqrt(dx * dx + dy * dy + dz * dz)
-            kn = normal_stiffness(mat[mi, M_YOUNG], ri, mat[mj, M_YOUNG], rj)
-            ks = shear_stiffness(mat[mi, M_YOUNG], ri, mat[mi, M_RATIO], mat[mj, M_YOUNG], rj,
-                                 mat[mj, M_RATIO])
             bonded = has_coh and hi[k, I_BOND] == BOND_ACTIVE
-            if bonded:
-                u = delta - hf[k, H_UNP]
-                e_n += 0.5 * kn * u * u
-            elif delta > 0.0:
-                e_n += 0.5 * kn * delta * delta
+            if not bonded and (mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
+                               or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN):
+                # Hertz: 2/5 k_no delta^(5/2); the springs of the stiffness they were made with
+                # (the last step's overlap)
+                kno, kso = hertz_coefficients(mat[mi, M_YOUNG], mat[mi, M_POISSON],
+                                              mat[mj, M_YOUNG], mat[mj, M_POISSON],
+                                              ri * rj / (ri + rj))
+                if delta > 0.0:
+                    e_n += 0.4 * kno * delta * delta * math.sqrt(delta)
+                sd = math.sqrt(hf[k, H_DN])
+                kn = 1.5 * kno * sd
+                ks = kso * sd
+            else:
+                kn = normal_stiffness(mat[mi, M_YOUNG], ri, mat[mj, M_YOUNG], rj)
+                ks = shear_stiffness(mat[mi, M_YOUNG], ri, mat[mi, M_RATIO], mat[mj, M_YOUNG],
+                                     rj, mat[mj, M_RATIO])
+                if bonded:
+                    u = delta - hf[k, H_UNP]
+                    e_n += 0.5 * kn * u * u
+                elif delta > 0.0:
+                    e_n += 0.5 * kn * delta * delta
             if ks > 0.0:
                 e_s += 0.5 * (hf[k, 0] ** 2 + hf[k, 1] ** 2 + hf[k, 2] ** 2) / ks
             if has_mom:
@@ -1167,8 +1304,17 @@ def stiffness_sum(x, radius, mat_id, mat, row_start, nbr, c_p, c_kn, ksum):
             dx = x[j, 0] - x[i, 0]
             dy = x[j, 1] - x[i, 1]
             dz = x[j, 2] - x[i, 2]
-            if dx * dx + dy * dy + dz * dz < (ri + rj) ** 2:
-                kn = normal_stiffness(mat[mat_id[i], M_YOUNG], ri, mat[mat_id[j], M_YOUNG], rj)
+            d2 = dx * dx + dy * dy + dz * dz
+            if d2 < (ri + rj) ** 2:
+                mi = mat_id[i]
+                mj = mat_id[j]
+                if mat[mi, M_LAW] == LAW_HERTZ_MINDLIN or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN:
+                    kno, _kso = hertz_coefficients(mat[mi, M_YOUNG], mat[mi, M_POISSON],
+                                                   mat[mj, M_YOUNG], mat[mj, M_POISSON],
+                                                   ri * rj / (ri + rj))
+                    kn = 1.5 * kno * math.sqrt(ri + rj - math.sqrt(d2))
+                else:
+                    kn = normal_stiffness(mat[mi, M_YOUNG], ri, mat[mj, M_YOUNG], rj)
                 ksum[i] += kn
                 ksum[j] += kn
     for c in range(c_p.shape[0]):

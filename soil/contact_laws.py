@@ -30,7 +30,19 @@ __all__ = [
     "contact_duration",
     "no_tension_restitution",
     "rebound_restitution",
+    "hertz_coefficients",
+    "hertz_damping_coefficient",
+    "hertz_normal_dissipation",
+    "varying_spring_dissipation",
+    "hertz_max_overlap",
+    "hertz_contact_duration",
 ]
+
+#: ``Material.contact_law`` codes in the material table (``soil._kernels.M_LAW``)
+LAW_LINEAR = 0
+LAW_HERTZ_MINDLIN = 1
+#: the contact laws by name, in code order
+CONTACT_LAWS = ("linear", "hertz_mindlin")
 
 
 @jit
@@ -457,3 +469,117 @@ def normal_dissipation(fn_old, fn, delta, d_delta, kn):
     e1 = delta if delta > 0.0 else 0.0
     e0 = d0 if d0 > 0.0 else 0.0
     return 0.5 * (fn_old + fn) * d_delta - 0.5 * kn * (e1 * e1 - e0 * e0)
+
+
+# ----------------------------------------------------------------------------------------------
+# Hertz-Mindlin (no-slip Mindlin shear, Thornton's unloading rule, Tsuji's damping)
+# ----------------------------------------------------------------------------------------------
+@jit
+def hertz_coefficients(young_i: float, nu_i: float, young_j: float, nu_j: float,
+                       r_eff: float):
+    """Coefficients of the Hertz-Mindlin contact: ``(k_no, k_so)`` with the normal force
+    F_n = k_no delta^(3/2) and the tangent shear stiffness k_s = k_so delta^(1/2).
+
+    k_no = 4/3 E* sqrt(R*), k_so = 8 G* sqrt(R*), with 1/E* = (1 - nu_i^2)/E_i
+    + (1 - nu_j^2)/E_j and 1/G* = (2 - nu_i)/G_i + (2 - nu_j)/G_j, G = E / (2 (1 + nu)).
+
+    Parameters
+    ----------
+    young_i, young_j : float
+        Young's moduli [Pa].
+    nu_i, nu_j : float
+        Poisson's ratios [-] (true ones, not the linear law's ks/kn).
+    r_eff : float
+        Effective radius R* [m]: R_i R_j / (R_i + R_j) for two spheres, the sphere's own radius
+        on a plane.
+
+    Returns
+    -------
+    tuple of float
+        (k_no [N/m^1.5], k_so [N/m^1.5]).
+
+    Notes
+    -----
+    Hertz (1882); Mindlin (1949) no-slip tangential stiffness 8 G* a with the contact radius
+    a = sqrt(R* delta) (e.g. Di Renzo & Di Maio 2004, Chem. Eng. Sci. 59:525, eqs. 1-6). For
+    two grains of one material k_so = 4 G sqrt(R*) / (2 - nu), Yade's
+    ``Ip2_FrictMat_FrictMat_MindlinPhys`` ``kso`` (which averages G and nu between two
+    materials where this form is exact in series).
+    """
+    e_star = 1.0 / ((1.0 - nu_i * nu_i) / young_i + (1.0 - nu_j * nu_j) / young_j)
+    g_i = young_i / (2.0 * (1.0 + nu_i))
+    g_j = young_j / (2.0 * (1.0 + nu_j))
+    g_star = 1.0 / ((2.0 - nu_i) / g_i + (2.0 - nu_j) / g_j)
+    sr = math.sqrt(r_eff)
+    return 4.0 / 3.0 * e_star * sr, 8.0 * g_star * sr
+
+
+@jit
+def hertz_damping_coefficient(zeta: float, m_eff: float, kn_tangent: float) -> float:
+    """Normal dashpot of the Hertz contact, c_n = 2 sqrt(5/6) zeta sqrt(m* k_n,t) [N s/m].
+
+    ``k_n,t = 3/2 k_no delta^(1/2)`` is the tangent normal stiffness, so c_n grows as
+    delta^(1/4) and the restitution does not depend on the impact speed.
+
+    Notes
+    -----
+    Tsuji, Tanaka & Ishida (1992), Powder Technol. 71:239; zeta from the nominal restitution
+    as for the linear law (``damping_ratio``), the convention of Yade's
+    ``Ip2_FrictMat_FrictMat_MindlinPhys.en`` (alpha sqrt(m*) delta^(1/4)) and of codes like it.
+    """
+    return 2.0 * math.sqrt(5.0 / 6.0) * zeta * math.sqrt(m_eff * kn_tangent)
+
+
+@jit
+def hertz_normal_dissipation(fn_old, fn, delta, delta_old, kno):
+    """Energy dissipated by a damped Hertz contact over one step (centred form) [J].
+
+    D = 1/2 (F_old + F_new) (delta - delta_old) - 2/5 k_no (delta_+^(5/2) - delta_old,+^(5/2)):
+    the trapezoidal work of the normal force minus the change of the Hertz elastic energy
+    (``normal_dissipation`` for the linear spring).
+    """
+    e1 = delta if delta > 0.0 else 0.0
+    e0 = delta_old if delta_old > 0.0 else 0.0
+    return (0.5 * (fn_old + fn) * (delta - delta_old)
+            - 0.4 * kno * (e1 * e1 * math.sqrt(e1) - e0 * e0 * math.sqrt(e0)))
+
+
+@jit
+def varying_spring_dissipation(ox, oy, oz, fx, fy, fz, dux, duy, duz, k_old, k):
+    """``spring_dissipation`` for a spring whose stiffness changed during the step [J].
+
+    D = -1/2 (F_old + F_new) . du - (|F_new|^2 / (2 k) - |F_old|^2 / (2 k_old)): the trapezoidal
+    work minus the change of the stored energy, each end with its own stiffness. With the
+    Mindlin shear spring and Thornton's unloading rule (the stored force scaled by k / k_old
+    when the overlap shrinks) D >= 0 to first order: a stiffening spring at constant force
+    stores less, a softening one sheds the scaled-off part.
+
+    Parameters
+    ----------
+    ox, oy, oz : float
+        Spring force of the previous step carried to the current frame (before any scaling).
+    fx, fy, fz : float
+        Spring force of this step (scaled, capped).
+    dux, duy, duz : float
+        Relative displacement increment of this step.
+    k_old, k : float
+        Stiffness of the previous step and of this one (0 = nothing stored at that end).
+    """
+    w = -0.5 * ((ox + fx) * dux + (oy + fy) * duy + (oz + fz) * duz)
+    e1 = 0.5 * (fx * fx + fy * fy + fz * fz) / k if k > 0.0 else 0.0
+    e0 = 0.5 * (ox * ox + oy * oy + oz * oz) / k_old if k_old > 0.0 else 0.0
+    return w - (e1 - e0)
+
+
+def hertz_max_overlap(m_eff: float, e_star: float, r_eff: float, speed: float) -> float:
+    """Largest overlap of an undamped Hertz impact, delta_max = (15 m* v^2 / (16 E* sqrt(R*)))
+    ^(2/5) [m] (energy balance 1/2 m* v^2 = 2/5 k_no delta_max^(5/2))."""
+    return (15.0 * m_eff * speed ** 2 / (16.0 * e_star * math.sqrt(r_eff))) ** 0.4
+
+
+def hertz_contact_duration(m_eff: float, e_star: float, r_eff: float, speed: float) -> float:
+    """Duration of an undamped Hertz impact, t_c = 2 (delta_max / v) int_0^1 dx / sqrt(1 -
+    x^(5/2)) = 2.9432 delta_max / v [s] (Johnson 1985, Contact Mechanics, eq. 11.24)."""
+    # int_0^1 (1 - x^(5/2))^(-1/2) dx = sqrt(pi) Gamma(7/5) / Gamma(9/10)
+    c = math.sqrt(math.pi) * math.gamma(1.4) / math.gamma(0.9)
+    return 2.0 * c * hertz_max_overlap(m_eff, e_star, r_eff, speed) / speed

@@ -10,6 +10,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from .contact_laws import CONTACT_LAWS
+
 __all__ = ["Cohesion", "Rolling", "Material"]
 
 
@@ -133,10 +135,24 @@ class Material:
     cohesion : Cohesion or None
     rolling : Rolling or None
     name : str
+    contact_law : str
+        ``"linear"`` (default): Cundall-Strack springs k_n = E r, k_s = stiffness_ratio k_n
+        (Yade ``Law2_ScGeom_FrictPhys_CundallStrack``, the thesis's law). ``"hertz_mindlin"``:
+        F_n = 4/3 E* sqrt(R*) delta^(3/2) and the Mindlin shear stiffness 8 G* sqrt(R* delta)
+        from ``young`` and ``poisson`` (``contact_laws.hertz_coefficients``), the shear force
+        scaled down with the stiffness when the overlap shrinks (Thornton), the dashpot of
+        ``restitution`` as Tsuji's (``contact_laws.hertz_damping_coefficient``). With
+        ``cohesion`` a bond is the cohesive law's linear springs (from ``young`` and
+        ``stiffness_ratio``); a contact without a bond, or whose bond broke, is Hertz-Mindlin.
+        A pair of two materials uses the Hertz-Mindlin law when either has it.
+    poisson : float
+        Poisson's ratio nu [-], in [0, 0.5); used by ``contact_law="hertz_mindlin"`` only (the
+        linear law's ks/kn is ``stiffness_ratio``).
 
     Notes
     -----
-    Yade ``Ip2_FrictMat_FrictMat_FrictPhys``; Varriale (2019) eqs. 3.2-3.6.
+    Yade ``Ip2_FrictMat_FrictMat_FrictPhys``; Varriale (2019) eqs. 3.2-3.6; Hertz-Mindlin as
+    Yade ``Law2_ScGeom_MindlinPhys_Mindlin``.
     """
 
     young: float  # [Pa], > 0
@@ -148,6 +164,8 @@ class Material:
     cohesion: Cohesion | None = None
     rolling: Rolling | None = None
     name: str = "material"
+    contact_law: str = "linear"  # "linear" | "hertz_mindlin"
+    poisson: float = 0.25  # [-], in [0, 0.5); Hertz-Mindlin only
 
     def __post_init__(self) -> None:
         c = "Material"
@@ -171,6 +189,11 @@ class Material:
             _fail(c, "rolling", self.rolling, "must be a soil.Rolling or None")
         if not isinstance(self.name, str):
             _fail(c, "name", self.name, "must be a str")
+        if self.contact_law not in CONTACT_LAWS:
+            _fail(c, "contact_law", self.contact_law, f"must be one of {CONTACT_LAWS}")
+        nu = _finite(c, "poisson", self.poisson)
+        if not 0.0 <= nu < 0.5:
+            _fail(c, "poisson", self.poisson, "must be in [0, 0.5) [-]")
 
     @property
     def damping_ratio(self) -> float:

@@ -13,6 +13,7 @@ import numpy as np
 from soil import _kernels as K
 from soil import _kernels_loop as L
 from soil.boundaries import BoundaryBody
+from soil.contact_laws import CONTACT_LAWS
 from soil.energy import balance, kinetic
 from soil.params import Material
 from soil.particles import Particles
@@ -45,6 +46,8 @@ def _material_table(materials: Sequence[Material]) -> np.ndarray:
         tab[m, K.M_RESTITUTION] = 1.0 if mat.restitution is None else mat.restitution
         tab[m, K.M_TENSION] = 1.0 if mat.dashpot_tension else 0.0
         tab[m, K.M_DENSITY] = mat.density
+        tab[m, K.M_LAW] = CONTACT_LAWS.index(mat.contact_law)
+        tab[m, K.M_POISSON] = mat.poisson
         tab[m, K.M_ETA_R] = -1.0
         tab[m, K.M_ETA_T] = -1.0
         tab[m, K.M_MU_R] = -1.0
@@ -211,7 +214,9 @@ class Simulation:
         self._has_roll = self._has_rot and any(m.rolling is not None for m in materials)
         self._has_visc = any(m.restitution is not None and m.restitution < 1.0 for m in materials)
         self._has_mom = self._has_rot and (self._has_coh or self._has_roll)
-        self._ncol = K.H_NCOL_FULL if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC
+        self._has_hertz = any(m.contact_law == "hertz_mindlin" for m in materials)
+        self._ncol = (K.H_NCOL_HERTZ if self._has_hertz else K.H_NCOL_FULL
+                      if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC)
         self._nicol = 1 if self._has_coh else 0
         # boundary elements (analytic first, then mesh triangles)
         etype, ebody, ep, en, er, ea0, ea1 = [], [], [], [], [], [], []
@@ -691,7 +696,7 @@ class Simulation:
                                               self._has_coh, self._has_mom)
         bh = self._bhist
         if bh.shape[0]:
-            e_n += float(0.5 * np.sum(bh[:, 7] * self._c_d**2))
+            e_n += float(np.sum(bh[:, 13]))
             ks = bh[:, 8]
             fs2 = np.einsum("ij,ij->i", bh[:, :3], bh[:, :3])
             e_s += float(0.5 * np.sum(np.divide(fs2, ks, out=np.zeros_like(fs2), where=ks > 0)))

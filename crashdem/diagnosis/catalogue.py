@@ -398,6 +398,10 @@ class FullSearch:
     #: the scenario's own grains, or the coarse search tier's); the realisation floor's bed
     #: stiffer below its top grain row (``stiffer_soil_depths``). None: the shallowest level
     top_row_depth: float | None = None
+    #: the Young's modulus factor of the realisation floor's whole bed with the Hertz-Mindlin
+    #: contact law (``hertz_floor_overrides``; set by the command line for a scenario of the
+    #: linear law: ``HERTZ_FLOOR_YOUNG_FACTOR``); None: no such run
+    hertz_floor: float | None = None
 
     def __post_init__(self) -> None:
         names = [f[0] for f in self.forms]
@@ -408,6 +412,10 @@ class FullSearch:
         if len(self.values) < 2 or any(b <= a for a, b in zip(self.values, self.values[1:])):
             raise ValueError(f"FullSearch.{self.parameter}.values={self.values!r}: must be at "
                              f"least two ascending values [{self.unit}]")
+        if self.hertz_floor is not None and not (math.isfinite(self.hertz_floor)
+                                                 and self.hertz_floor > 0.0):
+            raise ValueError(f"FullSearch.{self.parameter}.hertz_floor={self.hertz_floor!r}: "
+                             "must be a finite factor > 0 [-] or None")
         if self.top_row_depth is not None and not (math.isfinite(self.top_row_depth)
                                                    and self.top_row_depth > 0.0):
             raise ValueError(f"FullSearch.{self.parameter}.top_row_depth="
@@ -559,6 +567,15 @@ STIFFER_SOIL_FACTORS: tuple[float, ...] = (2.0, 5.0)
 #: depth [m] of the stiffness-only layer that makes the whole bed stiffer: every grain centre
 #: lies below the bed's nominal top, where the deposition cuts them
 WHOLE_BED_DEPTH = 1e-3
+#: Young's modulus factor of the realisation floor's run of the bed with the other contact law,
+#: Hertz-Mindlin (``FullSearch.hertz_floor``, set by the command line for a linear scenario):
+#: another code's law, calibrated on the same test. Measured on a Yade bed (null 21, 13.7 m):
+#: Yade's Hertz-Mindlin grains penetrate as deep as its linear ones at 4 x the modulus (0.601
+#: against 0.609 m), and crashdem's Hertz-Mindlin law on that bed follows Yade's within 3.2 %
+#: (docs/diagnosis.md, "A Hertz-Mindlin law of our own")
+HERTZ_FLOOR_YOUNG_FACTOR = 4.0
+#: the form name of that run in the floor's rows and words
+HERTZ_FLOOR_FORM = "Hertz-Mindlin"
 
 
 def stiffer_soil_depths(fs: FullSearch | None) -> tuple[float, ...]:
@@ -595,6 +612,17 @@ def stiffer_soil_overrides(fs: FullSearch | None, factor: float,
         return None
     return {**keys, **{k: float(below) for k in fs.keys},
             "physics.soil_layering.lower_young_factor": float(factor)}
+
+
+def hertz_floor_overrides(fs: FullSearch | None) -> dict[str, Any] | None:
+    """Scenario overrides of the whole bed with the Hertz-Mindlin contact law at
+    ``fs.hertz_floor`` x the scenario's Young's modulus, on the same bed (the stiffness form of
+    the layering search ``fs``, as ``stiffer_soil_overrides``: the law does not change the
+    deposition), or None when ``fs`` has no such run or no stiffness form."""
+    if fs is None or fs.hertz_floor is None:
+        return None
+    ov = stiffer_soil_overrides(fs, fs.hertz_floor)
+    return None if ov is None else {**ov, "soil.contact_law": "hertz_mindlin"}
 
 
 def _stiffness_form_keys(fs: FullSearch | None) -> dict[str, Any] | None:

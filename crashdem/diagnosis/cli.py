@@ -721,7 +721,7 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
     ``off`` none. The coarse runs deposit their beds in ``packing_cache`` when given
     (``_packing_cache``), else in ``out/search_runs/packings``, and are kept in / taken from
     ``run_cache`` (``crashdem.runcache.RunCache``) when given."""
-    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.catalogue import DROP, HERTZ_FLOOR_YOUNG_FACTOR
 
     if mode not in ("auto", "full", "coarse", "off"):
         raise ValueError(f"--full-search={mode!r}: must be one of auto, full, coarse, off")
@@ -755,6 +755,11 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         if "soil_layering" in searched and bed is None and radius:
             searched["soil_layering"] = replace(searched["soil_layering"],
                                                 top_row_depth=2.0 * float(radius))
+        # the realisation floor's bed with the other contact law (the recording's code may use
+        # Hertz-Mindlin, most codes' default): a linear scenario's only
+        if "soil_layering" in searched and scen.get("soil.contact_law") == "linear":
+            searched["soil_layering"] = replace(searched["soil_layering"],
+                                                hertz_floor=HERTZ_FLOOR_YOUNG_FACTOR)
         return searched
 
     note = ""

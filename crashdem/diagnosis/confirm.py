@@ -575,11 +575,13 @@ class _SearchTier:
     verdicts: dict[str, str]
     #: the run that stands for each effect on the search tier (``standing``)
     standing: dict[str, Row] = field(default_factory=dict)
-    #: the floor a screened claim is held to there (``_search_support``): the replicates and
-    #: the stiffer-soil runs at the layer levels' own modulus factor only; None: ``floor``
+    #: the floor a screened claim is held to there (``_search_support``): the replicates, the
+    #: stiffer-soil runs at the layer levels' own modulus factor only and the bed with the
+    #: Hertz-Mindlin law (another code's realisation, no stiffness of its own); None: ``floor``
     claim_floor: dict[str, float] | None = None
-    #: the stiffer-soil runs raised ``claim_floor`` above the replicates' (the verdict's words)
-    claim_floor_stiffer: bool = False
+    #: the verdict's words for the runs that raised ``claim_floor`` above the replicates'
+    #: ("" when none did)
+    claim_floor_stiffer: str = ""
 
 
 @dataclass
@@ -823,6 +825,10 @@ class _Confirmation:
                 if ov is not None:
                     out += [(STIFFER, {**ov, **rv, **self.cfc_key}, float(f))
                             for rv in self.beds]
+        ov = catalogue.hertz_floor_overrides(lay)
+        if ov is not None:
+            out += [(STIFFER, {**ov, **rv, **self.cfc_key}, float(lay.hertz_floor))
+                    for rv in self.beds]
         return out
 
     def outputs(self, sim: Simulator, requests: list[Request]) -> list[Any]:
@@ -1136,9 +1142,14 @@ class _Confirmation:
         self.stiff_rows = stiff_rows
         before = float(rep.fit["before"]["overall"])
         floor = _realisation_floor(rows, before, stiff_rows)
-        claim_floor = _realisation_floor(rows, before,
-                                         [r for r in stiff_rows if r["search_value"] == own_factor])
-        raised = claim_floor != _realisation_floor(rows, before)
+        hertz = [r for r in stiff_rows if r.get("form") == catalogue.HERTZ_FLOOR_FORM]
+        as_levels = [r for r in stiff_rows if r["search_value"] == own_factor
+                     and r.get("form") != catalogue.HERTZ_FLOOR_FORM]
+        claim_floor = _realisation_floor(rows, before, as_levels + hertz)
+        raised = ""
+        if claim_floor != _realisation_floor(rows, before):
+            raised = " or the bed made as stiff as its levels" + (
+                " or with the Hertz-Mindlin law" if hertz else "")
         best = self.standing(rows[1:], floor)
         promote = sorted((r for r in best.values() if _decisive(r, floor)),
                          key=lambda r: -r["delta_bic_vs_reference"])[:SEARCH_PROMOTE]
@@ -1416,7 +1427,7 @@ class _Confirmation:
                                       "no level of it ran on the search simulator"))
         if _not_decisively_worse(run, f):
             return None
-        stiff = " or the bed made as stiff as its levels" if tier.claim_floor_stiffer else ""
+        stiff = tier.claim_floor_stiffer
         return (f"{who}, but on the search simulator its best level "
                 f"({run['search_value']:.4g} {self.searched[name].unit}, Delta BIC "
                 f"{run['delta_bic_vs_reference']:.1f}, score {run['score']:.3f}) is decisively "
@@ -2069,8 +2080,14 @@ def _stiffer_text(stiff: Sequence[Mapping[str, Any]]) -> str:
     forms: dict[str, list[float]] = {}
     for r in stiff:
         forms.setdefault(r.get("form", "whole bed"), []).append(float(r["young_factor"]))
-    return "".join(f" and the {'whole bed' if form == 'whole bed' else 'bed ' + form} "
-                   + " / ".join(f"x{f:g}" for f in fs) + " stiffer" for form, fs in forms.items())
+
+    def words(form: str, fs: list[float]) -> str:
+        x = " / ".join(f"x{f:g}" for f in fs)
+        if form == catalogue.HERTZ_FLOOR_FORM:
+            return f" and the whole bed with the Hertz-Mindlin law ({x} the modulus)"
+        return f" and the {'whole bed' if form == 'whole bed' else 'bed ' + form} {x} stiffer"
+
+    return "".join(words(form, fs) for form, fs in forms.items())
 
 
 def _stiffer_below(ov: Mapping[str, Any]) -> float:
@@ -2080,8 +2097,11 @@ def _stiffer_below(ov: Mapping[str, Any]) -> float:
 
 
 def _stiffer_form(ov: Mapping[str, Any]) -> str:
-    """The form of a stiffer-soil run from its overrides: "whole bed", or "below D m" (the bed
-    stiffer below its top grain row; its runs pool apart)."""
+    """The form of a stiffer-soil run from its overrides: "whole bed", "below D m" (the bed
+    stiffer below its top grain row; its runs pool apart), or ``catalogue.HERTZ_FLOOR_FORM``
+    (the whole bed with the Hertz-Mindlin law)."""
+    if ov.get("soil.contact_law") == "hertz_mindlin":
+        return catalogue.HERTZ_FLOOR_FORM
     below = _stiffer_below(ov)
     return "whole bed" if below <= catalogue.WHOLE_BED_DEPTH else f"below {below:g} m"
 

@@ -116,17 +116,34 @@ def _own_beds(common: dict, name: str, d: Path, own_seeds: Sequence[int],
     return mean, [m for m, _ in runs], runs[0][1]
 
 
+def law_overrides(cfg: dict) -> dict:
+    """crashdem's scenario values of a Yade case's impact law (``cfg``, the case's Yade
+    configuration): {} for the linear law; for Hertz-Mindlin the law, the grains' Young's
+    modulus and Poisson's ratio (the tank's and the drop mass's follow the grains', as in
+    Yade's run)."""
+    if cfg.get("contact_law", "linear") != "hertz_mindlin":
+        return {}
+    return {"soil.contact_law": "hertz_mindlin", "soil.material.young": float(cfg["hertz_young"]),
+            "soil.poisson": float(cfg["hertz_poisson"])}
+
+
 def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | None = None,
-             own_seeds: Sequence[int] = (1,), own_overrides: dict | None = None) -> dict:
+             own_seeds: Sequence[int] = (1,), own_overrides: dict | None = None,
+             contact_law: str | None = None) -> dict:
     """The runs of one Yade case (module docstring); returns the table row. ``own_seeds``:
     the packing seeds of crashdem's own beds (their metrics averaged; ``crashdem_own_beds``
-    holds each), ``own_overrides``: scenario values of those beds only."""
+    holds each), ``own_overrides``: scenario values of those beds only. ``contact_law``:
+    the case's impact law (``cases.CONTACT_LAWS``; None = ``cases.CONTACT_LAW``); with
+    ``"hertz_mindlin"`` crashdem runs its own Hertz-Mindlin law with the case's values
+    (``law_overrides``), and the run in Yade's facet wall is left out (its 4/3 is the linear
+    law's facet stiffness)."""
     from crashdem.diagnosis.generator_dem import cache_dir
     from validation.diagnosis_yade.cases import run_yade, write_yade_bed, yade_case
 
     t0 = time.perf_counter()
-    case = yade_case(seed, effect, raw=True)
+    case = yade_case(seed, effect, raw=True, contact_law=contact_law)
     meta = case.meta
+    law = law_overrides(meta["cfg"])
     hist, info = run_yade(meta["cfg"], cache_dir())  # the case's run, cached by yade_case
     yade = _yade_metrics(hist, info["mass"])
     name = f"{effect or 'null'}_{seed}"
@@ -134,22 +151,29 @@ def same_bed(effect: str | None, seed: int, work: Path, tank_diameter: float | N
     bed_file, n_yade, n_kept = write_yade_bed(meta, d / "yade_bed.npz")
     rot = ({"soil.rotation": "free", "soil.rolling_coefficient": 0.0}
            if effect == "particle_rotation" else {})
-    common = {"soil.radius": meta["radius"], **rot}
+    if law:
+        name += "_hertz"
+        d = work / name
+    common = {"soil.radius": meta["radius"], **rot, **law}
     imported = {**common, "soil.packing_file": str(bed_file)}
     on_yade, _ = _crashdem({**imported, "scenario.name": f"{name}_on_yade_bed"}, d)
     young = float(meta["cfg"]["young"])
-    facets, _ = _crashdem({**imported, "scenario.name": f"{name}_in_yade_wall",
-                           "container.diameter": 2.0 * meta["tank_radius"]
-                           * math.cos(math.pi / YADE_TANK_SEGMENTS),
-                           "container.wall_young": 4.0 / 3.0 * young}, d)
+    facets = None
+    if not law:
+        facets, _ = _crashdem({**imported, "scenario.name": f"{name}_in_yade_wall",
+                               "container.diameter": 2.0 * meta["tank_radius"]
+                               * math.cos(math.pi / YADE_TANK_SEGMENTS),
+                               "container.wall_young": 4.0 / 3.0 * young}, d)
     own, each, n_own = _own_beds(common, name, d, own_seeds, own_overrides)
     row = {"truth": effect, "seed": seed, "radius_m": meta["radius"],
+           "contact_law": meta["cfg"].get("contact_law", "linear"),
            "yade_grains": n_yade, "imported_grains": n_kept, "crashdem_own_grains": n_own,
            "own_seeds": [int(k) for k in own_seeds], "own_overrides": dict(own_overrides or {}),
            "yade": yade, "crashdem_on_yade_bed": on_yade, "crashdem_in_yade_wall": facets,
            "crashdem_own_bed": own, "crashdem_own_beds": each,
            "dynamics_penetration": on_yade["penetration_m"] / yade["penetration_m"] - 1.0,
-           "dynamics_in_yade_wall": facets["penetration_m"] / yade["penetration_m"] - 1.0,
+           "dynamics_in_yade_wall": (facets["penetration_m"] / yade["penetration_m"] - 1.0
+                                     if facets else float("nan")),
            "deposition_penetration": own["penetration_m"] / on_yade["penetration_m"] - 1.0}
     if tank_diameter is not None:
         wide_cfg = {**meta["cfg"], "tank_radius": 0.5 * float(tank_diameter)}
@@ -257,13 +281,14 @@ def _table(rows: list[dict]) -> str:
         f"a_{lo * 1e3:.0f}_{hi * 1e3:.0f}ms" for lo, hi in WINDOWS]
     lines = []
     for row in rows:
-        lines.append(f"\n{row['truth'] or 'null'} {row['seed']}: radius {row['radius_m']:g} m, "
+        lines.append(f"\n{row['truth'] or 'null'} {row['seed']} "
+                     f"({row.get('contact_law', 'linear')}): radius {row['radius_m']:g} m, "
                      f"Yade {row['yade_grains']} grains ({row['imported_grains']} imported), "
                      f"crashdem's own bed {row['crashdem_own_grains']}")
         lines.append(f"  {'':24s}" + "".join(f"{k:>13s}" for k in keys))
         for who in ("yade", "crashdem_on_yade_bed", "crashdem_in_yade_wall",
                     "crashdem_own_bed", "yade_wide", "crashdem_wide"):
-            if who in row:
+            if row.get(who):
                 lines.append(f"  {who:24s}" + "".join(f"{row[who][k]:13.4g}" for k in keys))
         lines.append(f"  penetration: dynamics (crashdem / Yade on Yade's bed) "
                      f"{row['dynamics_penetration']:+.1%}, in Yade's wall "
@@ -290,6 +315,9 @@ def main(argv=None) -> int:
     ap.add_argument("--own-set", action="append", default=[], metavar="KEY=VALUE",
                     help="a scenario value of crashdem's own beds only, e.g. "
                          "soil.deposition_friction_deg=35 (repeatable)")
+    ap.add_argument("--contact-law", default=None, choices=("linear", "hertz_mindlin"),
+                    help="the Yade cases' impact law (default: linear); hertz_mindlin: Yade's "
+                         "Hertz-Mindlin against crashdem's (soil.contact_law), same values")
     ap.add_argument("--deposition", action="store_true",
                     help="the deposition alone, on the bed of each case (any effect: its "
                          "bed is deposited as a null's): crashdem on Yade's grains against its "
@@ -346,7 +374,11 @@ def main(argv=None) -> int:
         print(_deposition_table(rows, summary))
         print(json.dumps({"cases": rows, "summary": summary}))
         return 0
-    rows = [same_bed(e, s, work, a.tank_diameter, seeds, own_overrides) for e, s in cases]
+    if a.deposition and a.contact_law:
+        ap.error("--contact-law: not with --deposition (the beds are deposited with the linear "
+                 "law either way)")
+    rows = [same_bed(e, s, work, a.tank_diameter, seeds, own_overrides, a.contact_law)
+            for e, s in cases]
     print(_table(rows))
     if len(rows) > 1 and a.own_seeds > 1:
         summary = deposition_summary(rows)

@@ -1988,6 +1988,14 @@ def test_search_tier_is_never_finer_or_larger_than_the_scenario(tmp_path):
     assert stiffer_soil_depths(searched["soil_layering"]) == (WHOLE_BED_DEPTH, 0.15)
     with pytest.raises(ValueError, match="top_row_depth=0.0: must be a finite depth > 0"):
         replace(searched["soil_layering"], top_row_depth=0.0)
+    # the floor's bed with the other contact law: a linear scenario's, not a Hertz one's
+    assert searched["soil_layering"].hertz_floor == 4.0
+    hz = campaign.with_overrides({"physics.soil_layering.enabled": False,
+                                  "soil.contact_law": "hertz_mindlin"})
+    assert _search_setup(hz, False, "full", {}, tmp_path / "h")[0][
+        "soil_layering"].hertz_floor is None
+    with pytest.raises(ValueError, match="hertz_floor=0.0: must be a finite factor > 0"):
+        replace(searched["soil_layering"], hertz_floor=0.0)
 
 
 @pytest.mark.parametrize("truth, runs, named", [(0.43, [0.5, 0.4], 0.4),
@@ -2607,3 +2615,66 @@ def test_grain_choice_moves_only_beyond_the_packing_scatter():
     single = [size(1.0, 50.0, None, 1), size(1.25, 43.0, None, 1)]
     assert grain_choice(single) == 1.25 and single[1]["se_vs_model"] == 0.0
     assert grain_choice([size(1.25, 10.0, 1.0)]) == 1.0  # the model's grains not rated
+
+
+@pytest.mark.parametrize("tiered", [False, True], ids=["one tier", "search tier"])
+def test_a_recording_the_other_contact_law_explains_is_not_claimed(tiered):
+    """The realisation floor holds the whole bed with the Hertz-Mindlin law (``FullSearch.
+    hertz_floor``, ``catalogue.hertz_floor_overrides``: the scenario's bed, the law switched,
+    4 x the modulus), beside the replicates and the stiffer beds: a recording that crashdem's
+    own bed under the other law explains is not missing physics. Stand-in: the full model's
+    Hertz-Mindlin run is the layer at 0.3 m (which the ROM stand-in cannot make otherwise), and
+    the recording is that layer: it is named without the Hertz run (``test_a_stiffer_soil_is_
+    not_named_a_layer``) and not with it; the Hertz runs are made on every level bed, counted,
+    reported (form ``Hertz-Mindlin``) and named in the decision. Fails without the run in the
+    floor."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.catalogue import DROP, HERTZ_FLOOR_FORM, hertz_floor_overrides
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    lay = replace(DROP.full_search["soil_layering"], hertz_floor=4.0)
+    ov = hertz_floor_overrides(lay)
+    assert ov["soil.contact_law"] == "hertz_mindlin"
+    assert ov["physics.soil_layering.depth"] == WHOLE_BED_DEPTH
+    assert ov["physics.soil_layering.lower_young_factor"] == 4.0
+    assert hertz_floor_overrides(DROP.full_search["soil_layering"]) is None
+    assert hertz_floor_overrides(lay.with_form("compacted")) is None
+    # a layer no level makes (they run x5)
+    layer = {"physics.soil_layering.enabled": True, "physics.soil_layering.depth": 0.3,
+             "physics.soil_layering.lower_young_factor": 2.5}
+
+    def with_law(calls):
+        inner = _form_simulator(calls)
+
+        def full(overrides):
+            o = dict(overrides)
+            if o.pop("soil.contact_law", "linear") == "hertz_mindlin":
+                o.update(layer)
+                calls.append(None)  # counted once: the inner call is popped below
+                out = inner(o)
+                calls.pop()
+                calls[-1] = dict(overrides)
+                return out
+            return inner(o)
+
+        return full
+
+    calls: list = []
+    search_calls: list = []
+    p = rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(layer))
+    rec = acquire(p, np.random.default_rng(7))
+    kw = {"search_simulator": with_law(search_calls)} if tiered else {}
+    rep = screen_then_confirm(simulate(RomParams()), rec, with_law(calls), top_k=2,
+                              numerics=(), level_beds=5, full_search={
+                                  **DROP.full_search, "soil_layering": lay},
+                              replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)], **kw)
+    assert rep.missing_physics is None, rep.decision
+    hz = [s for s in rep.fit["realisation"]["stiffer_soil"] if s["form"] == HERTZ_FLOOR_FORM]
+    assert len(hz) == 1 and hz[0]["young_factor"] == 4.0 and hz[0]["runs"] == 5
+    assert rep.fit["realisation"]["floor_delta_bic"] == pytest.approx(
+        hz[0]["delta_bic_vs_reference"])
+    made = [c for c in (search_calls if tiered else calls)
+            if c.get("soil.contact_law") == "hertz_mindlin"]
+    assert len(made) == 5
+    assert "the whole bed with the Hertz-Mindlin law (x4 the modulus)" in rep.decision
+    assert rep.simulations["full_simulations"] == len(calls)
