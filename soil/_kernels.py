@@ -520,8 +520,8 @@ H_UNP = 9  # plastic normal displacement [m]
 H_MB = 10  # 10..12 bending / rolling moment on j [N m]
 H_MT = 13  # 13..15 twisting moment on j [N m]
 H_NCOL_FULL = 16
-H_DN = 16  # overlap of the last step [m] (Hertz-Mindlin: the stiffness the spring was made with)
-H_NCOL_HERTZ = 17
+# Hertz-Mindlin pairs: one more column, the last (``hf.shape[1] - 1``): the overlap of the last
+# step [m], the stiffness the shear spring was made with (basic layout 8, full 17 columns)
 # per-pair int history columns
 I_BOND = 0
 
@@ -573,6 +573,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
     type C); stiffness from ``soil.contact_laws``.
     """
     n = x.shape[0]
+    dn = hf.shape[1] - 1  # Hertz-Mindlin: the last step's overlap
     chunks = balanced_rows(row_start, n, ROW_CHUNKS)
     for ch in prange(ROW_CHUNKS):
         for i in range(chunks[ch], chunks[ch + 1]):
@@ -633,7 +634,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     kn = 1.5 * kno * sd  # tangent normal stiffness
                     ks = kso * sd
                     if not fresh:
-                        d_old = hf[k, H_DN]
+                        d_old = hf[k, dn]
                     ks_old = kso * math.sqrt(d_old)
                 else:
                     kn = normal_stiffness(ei, ri, ej, rj)
@@ -701,7 +702,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         continue
                     if hertz_pair:
                         # the overlap a Hertz contact starts from if the bond breaks
-                        hf[k, H_DN] = delta if delta > 0.0 else 0.0
+                        hf[k, dn] = delta if delta > 0.0 else 0.0
                 else:
                     cn = 0.0
                     pulls = False
@@ -721,7 +722,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         if cn > 0.0:
                             d_prev = delta - delta_dot * dt if fresh else d_old
                             visc_acc += hertz_normal_dissipation(fn_old, fn, delta, d_prev, kno)
-                        hf[k, H_DN] = delta
+                        hf[k, dn] = delta
                     else:
                         fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
                         if cn > 0.0:
@@ -1226,9 +1227,10 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
     -----
     Linear springs: kn delta^2 / 2 (bonds: kn (delta - u_p)^2 / 2), |Fs|^2 / (2 ks),
     |M|^2 / (2 k_M). Hertz-Mindlin pairs: 2/5 k_no delta^(5/2), and the shear and rolling
-    springs over the stiffness of the overlap they were last made at (``H_DN``).
+    springs over the stiffness of the overlap they were last made at (the last column of ``hf``).
     """
     n = x.shape[0]
+    dn = hf.shape[1] - 1  # Hertz-Mindlin: the last step's overlap
     e_n = 0.0
     e_s = 0.0
     e_m = 0.0
@@ -1255,7 +1257,7 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
                                               ri * rj / (ri + rj))
                 if delta > 0.0:
                     e_n += 0.4 * kno * delta * delta * math.sqrt(delta)
-                sd = math.sqrt(hf[k, H_DN])
+                sd = math.sqrt(hf[k, dn])
                 kn = 1.5 * kno * sd
                 ks = kso * sd
             else:

@@ -20,7 +20,7 @@ import numpy as np
 from soil import _kernels as K
 
 #: digest of the jitted sources compiled in (see the module docstring)
-NUMBA_CACHE_DEPENDS = "ba03844314ac5482"
+NUMBA_CACHE_DEPENDS = "bea5ff27557e838c"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel

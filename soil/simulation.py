@@ -215,8 +215,9 @@ class Simulation:
         self._has_visc = any(m.restitution is not None and m.restitution < 1.0 for m in materials)
         self._has_mom = self._has_rot and (self._has_coh or self._has_roll)
         self._has_hertz = any(m.contact_law == "hertz_mindlin" for m in materials)
-        self._ncol = (K.H_NCOL_HERTZ if self._has_hertz else K.H_NCOL_FULL
-                      if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC)
+        # Hertz-Mindlin: one more column, the last step's overlap (the kernels' last column)
+        self._ncol = ((K.H_NCOL_FULL if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC)
+                      + int(self._has_hertz))
         self._nicol = 1 if self._has_coh else 0
         # boundary elements (analytic first, then mesh triangles)
         etype, ebody, ep, en, er, ea0, ea1 = [], [], [], [], [], [], []

@@ -4,7 +4,10 @@ Prints particle-steps per second for 1 and 2 Numba threads and the memory per pa
 Yade 2023.02a on this machine kind: ~3.8e5 (1 thread, 11.6k spheres) and 2.9e5 particle-steps/s
 (100k) (anchors section 8); the target is >= 1.2e6 on 1 thread for 50k particles.
 
-Usage: python validation/perf_soil_kernels.py [--n 50000] [--steps 200] [--small]
+``--hertz`` also runs the same scene with the Hertz-Mindlin law (``Material.contact_law``) and
+prints its rate over the linear law's, measured in the same run.
+
+Usage: python validation/perf_soil_kernels.py [--n 50000] [--steps 200] [--small] [--hertz]
 """
 
 from __future__ import annotations
@@ -23,7 +26,8 @@ SPHERE_R = 0.45  # [m] drop sphere radius
 V_IMPACT = 19.0  # [m/s]
 
 
-def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False) -> soil.Simulation:
+def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False,
+          law: str = "linear") -> soil.Simulation:
     """Cubic lattice (spacing 2 R_MEAN, radii R_MEAN (1 +- R_SPREAD)/(1 + R_SPREAD)) in an open
     box with the sphere just touching the bed surface, moving down at 19 m/s (coupled-body
     kinematics). ``fcc=True``: face-centred cubic lattice (12 neighbours at 2 R_MEAN, a much
@@ -45,7 +49,7 @@ def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False) -> soil
     rng = np.random.default_rng(seed)
     r = R_MEAN * (1.0 + R_SPREAD * rng.uniform(-1.0, 1.0, x.shape[0])) / (1.0 + R_SPREAD)
     mat = soil.Material(young=2e7, density=2650.0, friction_angle=np.radians(30.0),
-                        stiffness_ratio=0.25, name="gravel")
+                        stiffness_ratio=0.25, name="gravel", contact_law=law)
     p = soil.Particles(x=x, radius=r, material=0, rotation_blocked=True)
     top = float(x[:, 2].max()) + R_MEAN
     box = soil.BoundaryBody(shapes=[soil.Box((0, 0, 0), (side_len, side_len, 4 * side_len))])
@@ -55,9 +59,9 @@ def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False) -> soil
     return soil.Simulation(p, [mat], [box, sphere], threads=threads)
 
 
-def measure(n: int, steps: int, threads: int, fcc: bool = False) -> dict:
+def measure(n: int, steps: int, threads: int, fcc: bool = False, law: str = "linear") -> dict:
     numba.set_num_threads(threads)
-    sim = build(n, threads, fcc=fcc)
+    sim = build(n, threads, fcc=fcc, law=law)
     sim.step(5)  # warm-up (compilation is cached on disk)
     b0 = sim.n_builds
     t0 = time.perf_counter()
@@ -88,6 +92,8 @@ def main(argv=None):
     ap.add_argument("--steps", type=int, default=200)
     ap.add_argument("--small", action="store_true", help="2k particles, 20 steps (for tests)")
     ap.add_argument("--fcc", action="store_true", help="dense FCC lattice instead of cubic")
+    ap.add_argument("--hertz", action="store_true",
+                    help="also the Hertz-Mindlin law, its rate over the linear law's")
     a = ap.parse_args(argv)
     n, steps = (2_000, 20) if a.small else (a.n, a.steps)
     out = []
@@ -105,6 +111,13 @@ def main(argv=None):
             f"({res['pairs_per_particle']:.2f} pairs/particle); "
             f"|F_sphere|={res['sphere_force_N']:.3e} N"
         )
+        if a.hertz:
+            hz = measure(n, steps, th, a.fcc, "hertz_mindlin")
+            hz["law"] = "hertz_mindlin"
+            out.append(hz)
+            print(f"threads={th} Hertz-Mindlin: {hz['particle_steps_per_cpu_s']:.3e} per CPU-s, "
+                  f"{hz['particle_steps_per_cpu_s'] / res['particle_steps_per_cpu_s']:.2f} x "
+                  f"the linear law's; memory {hz['bytes_per_particle']:.0f} B/particle")
     numba.set_num_threads(prev)
     return out
 
