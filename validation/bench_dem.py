@@ -13,6 +13,11 @@ NewtonIntegrator (v += (F/m + g) dt; x += v dt).  Only the impact steps are time
 JIT compilation and loading excluded in both codes).  Each run is a subprocess (crashdem with
 NUMBA_NUM_THREADS, Yade with -j), so its peak RSS is its own.
 
+``--contact-law hertz_mindlin``: both codes with the Hertz-Mindlin law instead (Yade
+``Ip2_FrictMat_FrictMat_MindlinPhys`` + ``Law2_ScGeom_MindlinPhys_Mindlin``; Poisson's ratio
+0.25). Yade takes R* = r / 2 on a wall (it treats the wall as a sphere of the grain's radius),
+crashdem the sphere-on-plane r, so the wall contacts differ by sqrt(2) in stiffness there.
+
 Usage::
 
     python validation/bench_dem.py --quick                # ~4,000 particles, seconds
@@ -52,6 +57,7 @@ YOUNG = 2.0e7  # [Pa]
 DENSITY = 2650.0  # [kg/m^3]
 FRICTION = math.radians(30.0)  # [rad]
 STIFFNESS_RATIO = 0.25  # ks/kn [-]
+POISSON = 0.25  # Poisson's ratio [-] (--contact-law hertz_mindlin)
 RADIUS_MEAN = 0.05  # [m]
 RADIUS_SPREAD = 0.20  # [-]
 DROP_MASS = 850.0  # [kg]
@@ -64,17 +70,19 @@ BED_POROSITY_GUESS = 0.40  # only to size the container for a particle count
 CLEARANCE = 1.0e-3  # [m] gap between the drop mass and the highest grain under it at t = 0
 
 
-def materials():
-    """(soil, wall, drop mass) materials, identical in both codes."""
+def materials(law: str = "linear"):
+    """(soil, wall, drop mass) materials, identical in both codes; ``law``: the contact law
+    (``"hertz_mindlin"``: Poisson's ratio ``POISSON``)."""
     from soil.params import Material
 
+    kw = {"contact_law": law, "poisson": POISSON}
     soil_mat = Material(young=YOUNG, density=DENSITY, friction_angle=FRICTION,
-                        stiffness_ratio=STIFFNESS_RATIO, name="soil")
+                        stiffness_ratio=STIFFNESS_RATIO, name="soil", **kw)
     wall = Material(young=YOUNG, density=DENSITY, friction_angle=FRICTION,
-                    stiffness_ratio=STIFFNESS_RATIO, name="wall")
+                    stiffness_ratio=STIFFNESS_RATIO, name="wall", **kw)
     rho_mass = DROP_MASS / (4.0 / 3.0 * math.pi * DROP_RADIUS**3)
     mass = Material(young=YOUNG, density=rho_mass, friction_angle=0.0,
-                    stiffness_ratio=STIFFNESS_RATIO, name="drop_mass")
+                    stiffness_ratio=STIFFNESS_RATIO, name="drop_mass", **kw)
     return soil_mat, wall, mass
 
 
@@ -132,10 +140,10 @@ def _reset_peak_rss() -> bool:
 # ---------------------------------------------------------------------------------------------
 
 
-def _impact_sim(x, r, lo, hi, start, threads):
+def _impact_sim(x, r, lo, hi, start, threads, law="linear"):
     import soil
 
-    soil_mat, wall, mass = materials()
+    soil_mat, wall, mass = materials(law)
     parts = soil.Particles(x=x, radius=r, material=np.zeros(len(r), np.int32),
                            rotation_blocked=True)
     floor_walls = soil.BoundaryBody(
@@ -188,7 +196,7 @@ def crashdem_worker(cfg: dict) -> dict:
         del x, r, sel
     wlo = np.array([xw[:, 0].min() - 0.1, xw[:, 1].min() - 0.1, xw[:, 2].min() - 0.1])
     whi = np.array([xw[:, 0].max() + 0.1, xw[:, 1].max() + 0.1, start[2] + 1.0])
-    wsim, _ = _impact_sim(xw, rw, wlo, whi, start, threads)
+    wsim, _ = _impact_sim(xw, rw, wlo, whi, start, threads, cfg.get("contact_law", "linear"))
     wsim.step(3)
     del wsim, xw, rw
     gc.collect()
@@ -196,7 +204,7 @@ def crashdem_worker(cfg: dict) -> dict:
     hwm_reset = _reset_peak_rss()
     with np.load(cfg["packing_npz"]) as data:
         x, r = data["x"], data["radius"]
-    sim, drop = _impact_sim(x, r, lo, hi, start, threads)
+    sim, drop = _impact_sim(x, r, lo, hi, start, threads, cfg.get("contact_law", "linear"))
     del x, r
     m = DROP_MASS
     g = np.array([0.0, 0.0, -GRAVITY])
@@ -296,7 +304,7 @@ def run_yade(cfg_path: Path, threads: int) -> dict:
 
 
 def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, log,
-               yade_steps: int | None = None) -> list[dict]:
+               yade_steps: int | None = None, law: str = "linear") -> list[dict]:
     """Both codes at about ``n`` particles for each thread count.
 
     ``yade_steps`` (None = all) caps Yade's steps: its rate is then measured on the first
@@ -314,7 +322,7 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
     lo, hi, start, surface = _scene(packing, spec)
     npz = work / f"packing_{n}.npz"
     np.savez(npz, x=packing.x, radius=packing.radius)
-    soil_mat, wall, mass = materials()
+    soil_mat, wall, mass = materials(law)
     steps = int(round(DURATION / DT))
     y_steps = steps if yade_steps is None else min(steps, int(yade_steps))
     runs = []
@@ -328,9 +336,10 @@ def bench_size(n: int, threads_list, cache: Path, work: Path, use_yade: bool, lo
                 "packing_npz": str(npz),
                 "materials": [
                     {k: getattr(mm, k) for k in ("young", "stiffness_ratio", "friction_angle",
-                                                  "density")}
+                                                  "density", "poisson")}
                     for mm in (soil_mat, wall, mass)
                 ],
+                "contact_law": law,
                 "box_lo": lo.tolist(), "box_hi": hi.tolist(),
                 "drop_start": start.tolist(), "drop_radius": DROP_RADIUS,
                 "drop_velocity": [0.0, 0.0, -DROP_SPEED],
@@ -427,6 +436,9 @@ def main(argv=None) -> int:
     ap.add_argument("--cache", default=str(DEFAULT_CACHE / "packings"),
                     help="packing cache root (beds under <root>/<soil engine fingerprint>)")
     ap.add_argument("--keep", default=None, help="directory to keep the run files in")
+    ap.add_argument("--contact-law", default="linear", choices=("linear", "hertz_mindlin"),
+                    help="both codes' contact law (hertz_mindlin: Yade's MindlinPhys, "
+                         "crashdem's soil.Material.contact_law; Poisson's ratio 0.25)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.worker:
@@ -448,7 +460,7 @@ def main(argv=None) -> int:
     runs = []
     for n in sizes:
         runs += bench_size(n, threads, packing_cache(a.cache), work, use_yade, log,
-                           yade_steps.get(n))
+                           yade_steps.get(n), a.contact_law)
     print(table(runs))
     if not a.keep:
         shutil.rmtree(work, ignore_errors=True)

@@ -22,6 +22,7 @@ import time
 import numpy as np
 
 cfg = json.load(open(sys.argv[1]))
+HERTZ = cfg.get("contact_law", "linear") == "hertz_mindlin"
 data = np.load(cfg["packing_npz"])
 x, r = data["x"], data["radius"]
 mats = []
@@ -30,7 +31,8 @@ for m in cfg["materials"]:
         O.materials.append(  # noqa: F821 (Yade builtins)
             FrictMat(  # noqa: F821
                 young=m["young"],
-                poisson=m["stiffness_ratio"],
+                # Hertz-Mindlin: Poisson's ratio; the linear law: ks/kn
+                poisson=m["poisson"] if HERTZ else m["stiffness_ratio"],
                 frictionAngle=m["friction_angle"],
                 density=m["density"],
             )
@@ -63,8 +65,10 @@ O.engines = [  # noqa: F821
     InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()]),  # noqa: F821
     InteractionLoop(  # noqa: F821
         [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],  # noqa: F821
-        [Ip2_FrictMat_FrictMat_FrictPhys()],  # noqa: F821
-        [Law2_ScGeom_FrictPhys_CundallStrack()],  # noqa: F821
+        [Ip2_FrictMat_FrictMat_MindlinPhys() if HERTZ  # noqa: F821
+         else Ip2_FrictMat_FrictMat_FrictPhys()],  # noqa: F821
+        [Law2_ScGeom_MindlinPhys_Mindlin() if HERTZ  # noqa: F821
+         else Law2_ScGeom_FrictPhys_CundallStrack()],  # noqa: F821
     ),
     NewtonIntegrator(damping=0.0, gravity=(0.0, 0.0, -cfg["gravity"])),  # noqa: F821
 ]
