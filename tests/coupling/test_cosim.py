@@ -4,6 +4,8 @@ Beds are generated in code: a jittered cubic lattice of 576 spheres (r ~ 0.06 m)
 open box, hit by the 850 kg, 0.90 m drop sphere at 5 m/s.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -340,3 +342,24 @@ def test_restart_continues_the_run(dt, reference):
     bal = cos_b.momentum_balance()
     scale = np.abs(bal["impulse"]).max()
     np.testing.assert_allclose(bal["error"], 0.0, atol=MOMENTUM_RTOL * scale)
+
+
+def test_hertz_mindlin_coupled_sphere_follows_the_dem_particle(dt):
+    """Oracle: independent implementation, as ``test_coupled_sphere_follows_the_dem_particle``,
+    with the Hertz-Mindlin law (``soil.Material.contact_law``): the drop sphere as a DEM
+    particle (pair contacts) and as the coupled Exudyn body (boundary contacts, R* of the two
+    spheres) give the same trajectory to round-off, and the coupled ledger's residual is the
+    particle run's balance error (the coupling adds none of its own)."""
+    mats = [replace(m, contact_law="hertz_mindlin", poisson=0.25)
+            for m in _materials(**EQUIV)]
+    traj_p, sim_p = run_particle(dt, mats)
+    traj_c, _, cosim = run_coupled(dt, mats)
+    assert cosim.had_contact and np.abs(traj_p - X0).max() > 0.1
+    assert _rel_diff(traj_p, traj_c) < ROUNDOFF_RTOL
+    led = cosim.ledger
+    assert led.residual == pytest.approx(sim_p.energy()["balance_error"], rel=1e-6,
+                                         abs=1e-6 * led.scale)
+    assert abs(led.interface_mismatch) < LEDGER_RTOL * led.scale
+    # another law than the linear one: the trajectories part
+    traj_lin, _ = run_particle(dt, _materials(**EQUIV))
+    assert _rel_diff(traj_lin, traj_p) > 100 * ROUNDOFF_RTOL
