@@ -52,3 +52,37 @@ def test_facet_impact_is_one_linear_spring(foot):
     v_after = sim.synchronized_velocity()[0][0]
     assert abs(-v_after[2] / v_before[2] - 1.0) < RESTITUTION_TOL
     np.testing.assert_allclose(v_after[:2], 0.0, atol=1e-12)
+
+
+def test_hertz_mindlin_facet_impact_is_the_sphere_on_a_plane():
+    """Oracle: Hertz's impact of a sphere on a plane (R* = r, Johnson 1985) through a triangle
+    mesh (``soil.Material.contact_law="hertz_mindlin"``): one contact at a shared vertex, the
+    duration 2.9432 delta_max / v (+-2 dt) and the rebound 1 (1e-3); a facet takes the
+    grain's own radius as a plane does (the linear law's facet convention 2r is not Hertz's)."""
+    from soil.contact_laws import hertz_contact_duration
+
+    nu = 0.25
+    m = 4.0 / 3.0 * math.pi * R**3 * RHO
+    t_c = hertz_contact_duration(m, E / (2 * (1 - nu**2)), R, 1.0)
+    dt = t_c / 400
+    mesh = TriangleMesh.plane_patch((1.0, 1.0), (3, 3))
+    p = soil.Particles(x=[[1 / 6, 1 / 6, R + 1e-6]], radius=[R], v=[[0.0, 0.0, -1.0]])
+    mat = soil.Material(young=E, density=RHO, friction_angle=0.0, contact_law="hertz_mindlin",
+                        poisson=nu)
+    sim = soil.Simulation(p, [mat], [soil.BoundaryBody(shapes=[mesh])], gravity=(0, 0, 0),
+                          dt=dt)
+    t_start = t_end = None
+    max_contacts = 0
+    for _ in range(4000):
+        sim.step()
+        n_c = len(sim.contacts()["i"])
+        max_contacts = max(max_contacts, n_c)
+        if n_c and t_start is None:
+            t_start = sim.time
+        if t_start is not None and not n_c:
+            t_end = sim.time
+            break
+    assert t_start is not None and t_end is not None, "impact did not complete"
+    assert max_contacts == 1
+    assert abs((t_end - t_start) - t_c) <= 2 * dt
+    assert abs(sim.synchronized_velocity()[0][0][2] - 1.0) < 1e-3
