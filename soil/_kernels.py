@@ -570,7 +570,11 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
     -----
     Cundall-Strack linear law (Yade ``Law2_ScGeom_FrictPhys_CundallStrack``), cohesive moment
     law (Yade ``Law2_ScGeom6D_CohFrictPhys_CohesionMoment``), rolling resistance (Ai et al. 2011
-    type C); stiffness from ``soil.contact_laws``.
+    type C); stiffness from ``soil.contact_laws``. A pair of which either material has
+    ``M_LAW`` = Hertz-Mindlin and no bond: F_n = k_no delta^1.5, k_s = k_so sqrt(delta) with the
+    stored shear (and rolling) spring scaled by k_new / k_old when it softens (Thornton),
+    Tsuji's dashpot, the overlap kept in the last column of ``hf`` (Yade
+    ``Law2_ScGeom_MindlinPhys_Mindlin``, which does not scale).
     """
     n = x.shape[0]
     dn = hf.shape[1] - 1  # Hertz-Mindlin: the last step's overlap
@@ -999,7 +1003,9 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
     -----
     Cundall-Strack law on walls (Yade ``Law2_ScGeom_FrictPhys_CundallStrack`` with
     ``Ig2_Wall_Sphere_ScGeom`` / ``Ig2_Facet_Sphere_ScGeom``); wall side stiffness radius: r for
-    planes/cylinders, 2r for facets, R for a rigid sphere.
+    planes/cylinders, 2r for facets, R for a rigid sphere. Hertz-Mindlin (as ``pair_forces``):
+    R* = r on planes, cylinders and facets, r R / (r + R) on a sphere; the overlap of the last
+    step from the stored k_s (= k_so sqrt(delta)).
     """
     nc = c_p.shape[0]
     n_old = old_key.shape[0]

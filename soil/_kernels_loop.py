@@ -20,7 +20,7 @@ import numpy as np
 from soil import _kernels as K
 
 #: digest of the jitted sources compiled in (see the module docstring)
-NUMBA_CACHE_DEPENDS = "bea5ff27557e838c"
+NUMBA_CACHE_DEPENDS = "9589754cdc030ba7"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel
