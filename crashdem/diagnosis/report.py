@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from crashdem.diagnosis.catalogue import HERTZ_FLOOR_FORM
 from crashdem.signal import G0
 
 __all__ = ["write_report", "to_json", "to_markdown", "plot_overlays"]
@@ -329,7 +330,11 @@ def to_markdown(report, plots: list[str] | None = None,
                            "also holds the baseline's beds with the grains' modulus multiplied, "
                            "in the whole bed and below its top grain row (a layer that shallow "
                            "is not told apart from how stiff the surface grains are against the "
-                           "confined ones; the change averaged over the beds)."), "",
+                           "confined ones; the change averaged over the beds)"
+                           + ("; and, as another code's realisation, the whole bed with the "
+                              "Hertz-Mindlin contact law" if any(
+                                  r.get("form") == HERTZ_FLOOR_FORM
+                                  for r in real["stiffer_soil"]) else "") + "."), "",
                       "| grains | E factor | score | Delta BIC vs reference |",
                       "|---|---|---|---|"]
             for r in real["stiffer_soil"]:
