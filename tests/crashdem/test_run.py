@@ -61,15 +61,20 @@ def test_accelerometer_reads_specific_force_of_dem_contact_force(tiny_result):
     assert np.max(np.abs(a - f / m)) < 1e-9 * scale
 
 
-def test_velocity_change_equals_impulse(tiny_result):
-    """Oracle: impulse–momentum theorem. Delta v_z = integral of (F_z/m - g) dt over the
-    sampled record (box sampling preserves the integral of the DEM-rate signal)."""
-    with open_result(tiny_result) as res:
+def _impulse_balance(path):
+    """The drop mass's Delta v_z over the record and the integral of (F_z/m - g) dt, and its
+    contact force channel."""
+    with open_result(path) as res:
         v = res.channel("drop_mass_velocity_z", filtered=False)
         f = res.channel("drop_mass_contact_force_z", filtered=False)
     dt = 1 / 12500.0
-    dv_pred = np.sum(f.data[1:] / 850.0 - 9.81) * dt
-    dv = v.data[-1] - v.data[0]
+    return v.data[-1] - v.data[0], np.sum(f.data[1:] / 850.0 - 9.81) * dt, f.data
+
+
+def test_velocity_change_equals_impulse(tiny_result):
+    """Oracle: impulse–momentum theorem. Delta v_z = integral of (F_z/m - g) dt over the
+    sampled record (box sampling preserves the integral of the DEM-rate signal)."""
+    dv, dv_pred, _ = _impulse_balance(tiny_result)
     assert dv == pytest.approx(dv_pred, rel=0.03, abs=0.05)
     assert dv > 1.0  # the soil slowed the sphere by a clear margin
 
@@ -142,14 +147,9 @@ def test_hertz_mindlin_scenario_runs_with_the_law_on_every_impact_material(tiny_
     path = run_scenario(scen, out_dir=tmp_path, progress=False)
     with open_result(path) as res:
         assert res.complete
-        v = res.channel("drop_mass_velocity_z", filtered=False)
-        f = res.channel("drop_mass_contact_force_z", filtered=False)
-    dt = 1 / 12500.0
-    dv_pred = np.sum(f.data[1:] / 850.0 - 9.81) * dt
-    dv = v.data[-1] - v.data[0]
+    dv, dv_pred, f = _impulse_balance(path)
     assert dv == pytest.approx(dv_pred, rel=0.03, abs=0.05)
     assert dv > 1.0
-    with open_result(tiny_result) as res:
-        f_lin = res.channel("drop_mass_contact_force_z", filtered=False).data
-    n = min(len(f_lin), len(f.data))
-    assert np.max(np.abs(f.data[:n] - f_lin[:n])) > 0.05 * np.max(np.abs(f_lin[:n]))
+    f_lin = _impulse_balance(tiny_result)[2]
+    n = min(len(f_lin), len(f))
+    assert np.max(np.abs(f[:n] - f_lin[:n])) > 0.05 * np.max(np.abs(f_lin[:n]))

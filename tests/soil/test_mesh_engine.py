@@ -8,6 +8,7 @@ import pytest
 import soil
 from soil.contact_laws import contact_duration
 from soil.mesh import TriangleMesh
+from tests.soil.test_engine import _impact
 
 E = 2e7  # [Pa]
 RHO = 2650.0  # [kg/m^3]
@@ -34,24 +35,25 @@ def test_facet_impact_is_one_linear_spring(foot):
     mat = soil.Material(young=E, density=RHO, friction_angle=0.0, stiffness_ratio=0.25)
     sim = soil.Simulation(p, [mat], [soil.BoundaryBody(shapes=[mesh])], gravity=(0, 0, 0),
                           dt=dt)
-    v_before = sim.synchronized_velocity()[0][0].copy()
-    t_start = t_end = None
-    max_contacts = 0
-    for _ in range(10 * STEPS_PER_CONTACT):
-        sim.step()
-        n_c = len(sim.contacts()["i"])
-        max_contacts = max(max_contacts, n_c)
-        if n_c and t_start is None:
-            t_start = sim.time
-        if t_start is not None and not n_c:
-            t_end = sim.time
-            break
-    assert t_start is not None and t_end is not None, "impact did not complete"
+    dur, v_before, v_after, max_contacts = _one_impact(sim, 10 * STEPS_PER_CONTACT)
     assert max_contacts == 1
-    assert abs((t_end - t_start) - t_c) <= 2 * dt
-    v_after = sim.synchronized_velocity()[0][0]
+    assert abs(dur - t_c) <= 2 * dt
     assert abs(-v_after[2] / v_before[2] - 1.0) < RESTITUTION_TOL
     np.testing.assert_allclose(v_after[:2], 0.0, atol=1e-12)
+
+
+def _one_impact(sim, n_max):
+    """``test_engine._impact`` of particle 0, counting the contacts at each step: returns
+    (duration, v before, v after, most contacts at one step)."""
+    most = [0]
+
+    def in_contact(s):
+        n_c = len(s.contacts()["i"])
+        most[0] = max(most[0], n_c)
+        return n_c > 0
+
+    dur, vb, va = _impact(sim, 0, n_max, in_contact)
+    return dur, vb, va, most[0]
 
 
 def test_hertz_mindlin_facet_impact_is_the_sphere_on_a_plane():
@@ -71,18 +73,7 @@ def test_hertz_mindlin_facet_impact_is_the_sphere_on_a_plane():
                         poisson=nu)
     sim = soil.Simulation(p, [mat], [soil.BoundaryBody(shapes=[mesh])], gravity=(0, 0, 0),
                           dt=dt)
-    t_start = t_end = None
-    max_contacts = 0
-    for _ in range(4000):
-        sim.step()
-        n_c = len(sim.contacts()["i"])
-        max_contacts = max(max_contacts, n_c)
-        if n_c and t_start is None:
-            t_start = sim.time
-        if t_start is not None and not n_c:
-            t_end = sim.time
-            break
-    assert t_start is not None and t_end is not None, "impact did not complete"
+    dur, v_before, v_after, max_contacts = _one_impact(sim, 4000)
     assert max_contacts == 1
-    assert abs((t_end - t_start) - t_c) <= 2 * dt
-    assert abs(sim.synchronized_velocity()[0][0][2] - 1.0) < 1e-3
+    assert abs(dur - t_c) <= 2 * dt
+    assert abs(-v_after[2] / v_before[2] - 1.0) < 1e-3
