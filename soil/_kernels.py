@@ -543,6 +543,23 @@ def _clear_pair(hf, tq, k, has_rot):
 
 
 @numba.njit(cache=True, inline="always")
+def _is_hertz(mat, ma, mb):
+    """A contact of materials ``ma`` and ``mb`` follows the Hertz-Mindlin law (either has it)."""
+    return mat[ma, M_LAW] == LAW_HERTZ_MINDLIN or mat[mb, M_LAW] == LAW_HERTZ_MINDLIN
+
+
+@numba.njit(cache=True, inline="always")
+def _soften(tx, ty, tz, ox, oy, oz, k, k_old):
+    """Thornton's unloading rule on a trial spring ``t = o - k du``: when the stiffness fell
+    from ``k_old`` to ``k`` the stored part ``o`` is scaled by k / k_old (the spring sheds
+    energy instead of making it); unchanged otherwise."""
+    if k < k_old:
+        sc = k / k_old - 1.0
+        return tx + sc * ox, ty + sc * oy, tz + sc * oz
+    return tx, ty, tz
+
+
+@numba.njit(cache=True, inline="always")
 def _shear_trial(vrx, vry, vrz, nx, ny, nz, fx, fy, fz, n0x, n0y, n0z, twist, ks, dt):
     """The step's trial shear force of a contact (Cundall-Strack, shared by the particle pairs
     and the boundary contacts): the normal approach rate ``delta_dot = -v_r . n``, the stored
@@ -624,8 +641,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     n0y = ny
                     n0z = nz
                 # a bond is the cohesive law's linear springs; a contact without one is Hertz's
-                hertz_pair = (mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
-                              or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN)
+                hertz_pair = _is_hertz(mat, mi, mj)
                 hertz = hertz_pair and not bonded
                 kno = 0.0
                 sd = 0.0
@@ -665,12 +681,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                 delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
                     vrx, vry, vrz, nx, ny, nz, hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
                     n0x, n0y, n0z, twist, ks, dt)
-                if ks < ks_old:
-                    # Thornton's unloading rule: the stored force follows the softer spring
-                    sc = ks / ks_old - 1.0
-                    fsx += sc * ox
-                    fsy += sc * oy
-                    fsz += sc * oz
+                fsx, fsy, fsz = _soften(fsx, fsy, fsz, ox, oy, oz, ks, ks_old)
                 if bonded:
                     an = hf[k, H_AN]
                     at = hf[k, H_AT]
@@ -822,11 +833,7 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                             mbx = mox - kr * dtx
                             mby = moy - kr * dty
                             mbz = moz - kr * dtz
-                            if kr < kr_old:
-                                sc = kr / kr_old - 1.0
-                                mbx += sc * mox
-                                mby += sc * moy
-                                mbz += sc * moz
+                            mbx, mby, mbz = _soften(mbx, mby, mbz, mox, moy, moz, kr, kr_old)
                             if kr > 0.0:
                                 mbx, mby, mbz, _d = moment_cap(mbx, mby, mbz,
                                                                mu_r * r_eff * abs(fn), kr)
@@ -1053,7 +1060,7 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             rw = 2.0 * ri
         else:
             rw = ri
-        hertz = mat[mb, M_LAW] == LAW_HERTZ_MINDLIN or mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
+        hertz = _is_hertz(mat, mb, mi)
         kno = 0.0
         sd = 0.0
         d_old = delta
@@ -1101,12 +1108,7 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                                 + nz * (w[i, 2] + b_omg[b, 2]))
         delta_dot, ox, oy, oz, dux, duy, duz, fsx, fsy, fsz = _shear_trial(
             vrx, vry, vrz, nx, ny, nz, fsx0, fsy0, fsz0, n0x, n0y, n0z, twist, ks, dt)
-        if ks < ks_old:
-            # Thornton's unloading rule (see pair_forces)
-            sc = ks / ks_old - 1.0
-            fsx += sc * ox
-            fsy += sc * oy
-            fsz += sc * oz
+        fsx, fsy, fsz = _soften(fsx, fsy, fsz, ox, oy, oz, ks, ks_old)
         cn = 0.0
         pulls = False
         if has_visc:
@@ -1178,11 +1180,7 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
                 mrz = roz - kr * dtz
                 if not hertz or kr_old < 0.0:
                     kr_old = kr
-                if kr < kr_old:
-                    sc = kr / kr_old - 1.0
-                    mrx += sc * rox
-                    mry += sc * roy
-                    mrz += sc * roz
+                mrx, mry, mrz = _soften(mrx, mry, mrz, rox, roy, roz, kr, kr_old)
                 if kr > 0.0:
                     mrx, mry, mrz, _d = moment_cap(mrx, mry, mrz, mu_r * r_eff * abs(fn), kr)
                     if hertz:
@@ -1254,8 +1252,7 @@ def pair_elastic_energy(x, radius, mat_id, mat, row_start, nbr, hf, hi, has_coh,
             dz = x[j, 2] - x[i, 2]
             delta = ri + rj - math.sqrt(dx * dx + dy * dy + dz * dz)
             bonded = has_coh and hi[k, I_BOND] == BOND_ACTIVE
-            if not bonded and (mat[mi, M_LAW] == LAW_HERTZ_MINDLIN
-                               or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN):
+            if not bonded and _is_hertz(mat, mi, mj):
                 # Hertz: 2/5 k_no delta^(5/2); the springs of the stiffness they were made with
                 # (the last step's overlap)
                 kno, kso = hertz_coefficients(mat[mi, M_YOUNG], mat[mi, M_POISSON],
@@ -1316,7 +1313,7 @@ def stiffness_sum(x, radius, mat_id, mat, row_start, nbr, c_p, c_kn, ksum):
             if d2 < (ri + rj) ** 2:
                 mi = mat_id[i]
                 mj = mat_id[j]
-                if mat[mi, M_LAW] == LAW_HERTZ_MINDLIN or mat[mj, M_LAW] == LAW_HERTZ_MINDLIN:
+                if _is_hertz(mat, mi, mj):
                     kno, _kso = hertz_coefficients(mat[mi, M_YOUNG], mat[mi, M_POISSON],
                                                    mat[mj, M_YOUNG], mat[mj, M_POISSON],
                                                    ri * rj / (ri + rj))

@@ -20,7 +20,7 @@ import numpy as np
 from soil import _kernels as K
 
 #: digest of the jitted sources compiled in (see the module docstring)
-NUMBA_CACHE_DEPENDS = "9589754cdc030ba7"
+NUMBA_CACHE_DEPENDS = "5483f760b66bbf49"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel
