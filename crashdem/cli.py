@@ -250,6 +250,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "times each factor; when one grain size fits the recording decisively "
                         "better than the scenario's, make the whole confirmation at it "
                         "(default off; e.g. 0.8,1.25,1.5)")
+    d.add_argument("--law-fit", default=None, metavar="K[,K...]|off",
+                   help="run the baseline and its replicate packings on their own beds with the "
+                        "other contact law (Hertz-Mindlin for a linear scenario, linear for a "
+                        "Hertz-Mindlin one) at each factor K on the grains' modulus; when one "
+                        "fits the recording decisively better than the scenario's law, make the "
+                        "whole confirmation in it (default off; e.g. 2,4,8 for Hertz-Mindlin "
+                        "against a linear law calibrated on the same test)")
     d.add_argument("--grain-fit-tier", default=None, choices=("search", "tier", "full"),
                    help="where the grain fit runs when the search runs on the coarse tier: "
                         "search (default) on that tier; tier = on the scenario's own grains in "

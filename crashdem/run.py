@@ -175,11 +175,14 @@ def packing_spec(scen: Scenario):
 
 
 def impact_materials(scen: Scenario, packing) -> list:
-    """Materials of the impact phase: the packing's soil materials with the switched-on physics,
-    then the container wall and the impactor (their indices: ``len(soil)`` and ``len(soil)+1``)."""
+    """Materials of the impact phase: the packing's soil materials with the switched-on physics
+    and ``soil.impact_young_factor`` x their modulus, then the container wall (of that scaled
+    soil modulus unless ``container.wall_young`` or the floor's ``wall_young`` says otherwise)
+    and the impactor (their indices: ``len(soil)`` and ``len(soil)+1``)."""
     import soil
 
     mats = []
+    scale = float(scen["soil.impact_young_factor"])
     for m in packing.materials:
         kw: dict[str, Any] = {}
         if scen["physics.cohesion.enabled"]:
@@ -198,12 +201,14 @@ def impact_materials(scen: Scenario, packing) -> list:
         if e is not None:
             kw["restitution"] = e
         kw.update(_law(scen))
+        if scale != 1.0:
+            kw["young"] = m.young * scale
         mats.append(replace(m, **kw) if kw else m)
     wall_e = scen["container.wall_young"]
     if scen["physics.boundary_proximity.enabled"] and scen["physics.boundary_proximity.wall_young"] is not None:
         wall_e = scen["physics.boundary_proximity.wall_young"]
     base = packing.materials[0]
-    mats.append(replace(base, young=wall_e or base.young, name="wall", **_law(scen)))
+    mats.append(replace(base, young=wall_e or base.young * scale, name="wall", **_law(scen)))
     mats.append(replace(base, young=scen["impactor.material_young"], friction_angle=0.0,
                         name="impactor", **_law(scen)))  # thesis §3.1: impactor friction null
     return mats

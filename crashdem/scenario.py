@@ -175,6 +175,7 @@ SCHEMA: dict[str, Any] = {
         "restitution": F(None, "1", 0, 1, lo_open=True, doc="viscous normal damping from a restitution coefficient (null = off, thesis)", nullable=True),
         "contact_law": C("linear", "linear", "hertz_mindlin", doc="contact law of the impact phase: linear Cundall-Strack springs kn = E r, ks = stiffness_ratio kn (thesis, Yade's FrictPhys), or Hertz-Mindlin (Fn = 4/3 E* sqrt(R*) delta^1.5, ks = 8 G* sqrt(R* delta), Yade's MindlinPhys) for the grains, the walls and the impactor; the bed is deposited with the linear law either way (soil.Material.contact_law)"),
         "poisson": F(0.25, "1", 0, 0.5, hi_open=True, doc="Poisson's ratio of the grains, walls and impactor with contact_law = hertz_mindlin (unused by the linear law)"),
+        "impact_young_factor": F(1.0, "1", 0.01, 100.0, doc="factor on the grains' Young's modulus (both layers) and on a wall of the soil's modulus (container.wall_young null) in the impact phase; the bed is deposited at soil.material.young, so its packing (and packing cache entry) is the factor-1 bed's. A contact law calibrated on the same bed at another modulus (Hertz-Mindlin at about 4 x the linear law's on the campaign's gravel) without depositing it again"),
         "packing_file": S("", doc="bed imported instead of deposited (drop tests): .npz with x (N,3) and radius (N,) [m], or text rows 'x y z r' [m] (Yade export.text); floor at z = 0, tank on the z axis; empty = deposit (crashdem.beds)"),
     },
     "container": {

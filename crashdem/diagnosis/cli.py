@@ -402,6 +402,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
         grain = _grain_scales(getattr(args, "grain_check", None))
         gfit = _grain_fit_scales(getattr(args, "grain_fit", None))
+        lfit, lfit_law = _law_fit_factors(scen, getattr(args, "law_fit", None))
         level_beds = _level_beds(getattr(args, "level_beds", None))
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:
@@ -416,6 +417,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   numerics=numerics, level_beds=level_beds,
                                   grain_check=grain, grain_fit=gfit,
                                   grain_fit_simulator=gfit_sim,
+                                  law_fit=lfit, law_fit_law=lfit_law,
                                   grain_agree=getattr(args, "grain_check_agree", None)
                                   or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
@@ -538,6 +540,33 @@ def _grain_fit_scales(text: str | None) -> tuple[float, ...]:
     from crashdem.diagnosis.confirm import GRAIN_FIT_SCALES
 
     return _radius_factors(text, "--grain-fit", GRAIN_FIT_SCALES)
+
+
+def _law_fit_factors(scen, text: str | None) -> tuple[tuple[float, ...], str]:
+    """``--law-fit``: the factors on the scenario's grain modulus at which the baseline's
+    realisations run in the other contact law (default ``confirm.LAW_FIT_FACTORS``; ``off`` =
+    none), as the absolute ``soil.impact_young_factor`` values (times the scenario's own), and
+    that law: Hertz-Mindlin for a linear scenario, linear for a Hertz-Mindlin one."""
+    from crashdem.diagnosis.confirm import IMPACT_YOUNG_KEY, LAW_FIT_FACTORS
+
+    own = float(scen[IMPACT_YOUNG_KEY])
+    law = "linear" if scen["soil.contact_law"] == "hertz_mindlin" else "hertz_mindlin"
+    if text is None:
+        return tuple(own * k for k in LAW_FIT_FACTORS), law
+    if text.strip().lower() in ("off", "none", ""):
+        return (), law
+    lo, hi = 0.01 / own, 100.0 / own
+    try:
+        out = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        raise ValueError(f"--law-fit={text!r}: must be comma-separated factors on the grains' "
+                         f"modulus in [{lo:g}, {hi:g}] (e.g. 2,4,8) or off") from None
+    bad = [k for k in out if not (math.isfinite(k) and lo <= k <= hi)]
+    if bad:
+        raise ValueError(f"--law-fit={text!r}: factor {bad[0]:g} is outside [{lo:g}, {hi:g}] "
+                         f"(with the scenario's {IMPACT_YOUNG_KEY}={own:g}, the modulus factor "
+                         "must stay in [0.01, 100])")
+    return tuple(own * k for k in out), law
 
 
 def _radius_factors(text: str | None, opt: str, default: Sequence[float]

@@ -118,6 +118,24 @@ GRAIN_FIT_MARGIN = 6.0
 #: a floor on it (docs/diagnosis.md "The grain fit")
 GRAIN_FIT_SE = 2.0
 
+#: the law fit (``screen_then_confirm(..., law_fit=...)``, CLI ``--law-fit``): the baseline
+#: and its replicate packings run again on their own beds with the other contact law
+#: (``law_fit_law``; the command line takes Hertz-Mindlin for a linear scenario and the
+#: reverse) at each factor on the grains' modulus in the impact (``soil.impact_young_factor``),
+#: and when one fits the recording decisively better than the scenario's law (the grain fit's
+#: rule: ``GRAIN_FIT_MARGIN`` and ``GRAIN_FIT_SE``), the whole confirmation is made with every
+#: run in that law at that modulus. The contact law of a coarse-grained DEM soil is a model form
+#: that the recording's soil does not fix, and most DEM codes use Hertz-Mindlin where this one
+#: (after the thesis) uses linear springs; measured on Yade's Hertz-Mindlin recordings with the
+#: recording's law in the model: no wrong name and no null claim on 30, against one of each with
+#: the linear law (docs/diagnosis.md "The law fit"). Off by default (``()``)
+LAW_FIT_FACTORS: tuple[float, ...] = ()
+#: the scenario keys the law fit sets on every run of the other law
+LAW_KEY = "soil.contact_law"
+IMPACT_YOUNG_KEY = "soil.impact_young_factor"
+#: the contact laws a scenario may name (``soil.contact_law``)
+CONTACT_LAWS = ("linear", "hertz_mindlin")
+
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
 #: packing seed and the first ``LEVEL_BEDS - 1`` replicate seeds, each taken as its change
@@ -156,6 +174,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         grain_agree: str = GRAIN_CHECK_AGREE,
                         grain_fit: Sequence[float] = GRAIN_FIT_SCALES,
                         grain_fit_simulator: Simulator | None = None,
+                        law_fit: Sequence[float] = LAW_FIT_FACTORS,
+                        law_fit_law: str = "hertz_mindlin",
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -232,6 +252,17 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         scenario's): every realisation at every size, the model's grains too, each anchored on
         the baseline simulation through this simulator's own baseline run at the model's
         grains (``fit.grain_fit.simulator``)
+    law_fit : the grains' impact modulus factors (``soil.impact_young_factor``, absolute) of
+        the law fit (``LAW_FIT_FACTORS``; ``()`` skips it): after the grain fit, and under the
+        same conditions, the baseline's realisations run again on the simulator the search ran
+        on with the contact law ``law_fit_law`` at each factor, each rated like a grain size;
+        when one beats the scenario's law decisively (``law_choice``), the confirmation is made
+        again with every run in that law at that modulus (the realisation floor's own run of
+        the other law, ``FullSearch.hertz_floor``, is then left out) and its answer is the
+        report's; the law and modulus are then part of the recalibration (``fit.law_fit``:
+        each law's BIC, the one chosen, the answer at the scenario's law; ``fit.before`` stays
+        the scenario's own baseline). The grain check then runs in the law taken
+    law_fit_law : the other contact law of the law fit (``CONTACT_LAWS``)
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -256,6 +287,13 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if grain_agree not in ("all", "any"):
         raise ValueError(f"grain_agree={grain_agree!r}: must be 'all' or 'any' (how many of the "
                          "grain check's factors must name the effect)")
+    if law_fit_law not in CONTACT_LAWS:
+        raise ValueError(f"law_fit_law={law_fit_law!r}: must be one of {', '.join(CONTACT_LAWS)}"
+                         " (the other contact law of the law fit)")
+    bad = [k for k in law_fit if not (math.isfinite(float(k)) and 0.01 <= float(k) <= 100.0)]
+    if bad:
+        raise ValueError(f"law_fit={tuple(law_fit)!r}: factor {bad[0]!r} is outside [0.01, 100] "
+                         f"(the grains' impact modulus factor, {IMPACT_YOUNG_KEY})")
     if level_beds is None:
         level_beds = SEARCH_TIER_LEVEL_BEDS if search_simulator is not None else LEVEL_BEDS
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
@@ -283,6 +321,26 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             fitted["runs"] += _runs_made(full_simulator, search_simulator)
             for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
                 p.rep.fit[f"{key}_at_grain_fit"] = p.rep.fit[key]
+                p.rep.fit[key] = at_model.rep.fit[key]
+    lawed = None
+    if law_fit and not p.c.model_free and not p.c.cfc_key:
+        lawed = _law_fit(p, law_fit, law_fit_law, replicates)
+        if lawed["chosen"] is not None:
+            k = lawed["chosen"]["impact_young_factor"]
+            at_model = p
+            full_search = _without_hertz_floor(full_search)
+            p, full_simulator, search_simulator = _varied_pass(
+                lambda sim: _LawSwitched(sim, law_fit_law, k), recording_signals,
+                full_simulator, search_simulator, top_k=top_k, full_search=full_search,
+                replicates=replicates, level_beds=level_beds, numerics=numerics, **diagnose_kw)
+            lawed["at_model_law"] = {
+                "named": at_model.d.confirmed,
+                "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
+                "before": at_model.rep.fit["before"],
+                "full_simulations": at_model.rep.simulations.get("full_simulations")}
+            lawed["runs"] += _runs_made(full_simulator, search_simulator)
+            for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
+                p.rep.fit[f"{key}_at_law_fit"] = p.rep.fit[key]
                 p.rep.fit[key] = at_model.rep.fit[key]
     rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
     answers: dict[float, dict[str, Any]] = {}
@@ -320,38 +378,79 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             for h in rep.hypotheses:
                 if h["name"] == RECALIBRATION.name:
                     h["grain_radius_scale"] = fitted["chosen"]
+    if lawed is not None:
+        rep.fit["law_fit"] = lawed
+        rep.simulations["law_fit_simulations"] = lawed["runs"]
+        if lawed["chosen"] is not None:  # so is the law taken, at its modulus
+            for h in rep.hypotheses:
+                if h["name"] == RECALIBRATION.name:
+                    h["contact_law"] = law_fit_law
+                    h["impact_young_factor"] = lawed["chosen"]["impact_young_factor"]
     return rep
 
 
 def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[str, Any]],
                tier_sim: Simulator | None = None) -> dict[str, Any]:
     """The grain fit of ``screen_then_confirm``: the baseline's realisations (its own packing
-    and the replicates) at each grain-radius factor, on the simulator the search ran on
-    (anchored on the baseline simulation through that simulator's own baseline run at the
-    model's grains when it is a separate tier), or on ``tier_sim`` when given (every
-    realisation at every factor, anchored through its own baseline run at the model's
-    grains), each rated by its BIC against the recording (``_Confirmation.bic`` of its
-    weighted residual, no parameter); the factor taken is ``grain_choice``'s. Without
-    ``tier_sim``, at factor 1 the
-    first realisation is the baseline simulation itself, and the runs are those the
-    confirmation made already (``_reused_realisations``): the grain fit runs only the other
-    grain sizes."""
+    and the replicates) at each grain-radius factor, rated by ``_realisation_fit`` on the
+    simulator the search ran on or on ``tier_sim``; the factor taken is ``grain_choice``'s."""
+    variants: list[tuple[dict[str, Any], Callable[[Simulator], _Varied]]] = [
+        ({"radius_scale": 1.0}, _Varied)]
+    variants += [({"radius_scale": f}, lambda sim, f=f: _GrainScaled(sim, f))
+                 for f in (float(x) for x in factors) if f != 1.0]
+    sizes, runs, where = _realisation_fit(p, variants, replicates, tier_sim)
+    return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "se_factor": GRAIN_FIT_SE,
+            "chosen": grain_choice(sizes), "runs": runs, "simulator": where}
+
+
+def _law_fit(p: _Pass, factors: Sequence[float], law: str,
+             replicates: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """The law fit of ``screen_then_confirm``: the baseline's realisations in the scenario's
+    own law, then in contact law ``law`` at each impact modulus factor, rated by
+    ``_realisation_fit`` on the simulator the search ran on; the one taken is
+    ``law_choice``'s (None: the scenario's law stands)."""
+    variants: list[tuple[dict[str, Any], Callable[[Simulator], _Varied]]] = [
+        ({"contact_law": "scenario", "impact_young_factor": None}, _Varied)]
+    variants += [({"contact_law": law, "impact_young_factor": float(k)},
+                  lambda sim, k=float(k): _LawSwitched(sim, law, k)) for k in factors]
+    laws, runs, where = _realisation_fit(p, variants, replicates, None)
+    return {"law": law, "laws": laws, "margin_bic": GRAIN_FIT_MARGIN, "se_factor": GRAIN_FIT_SE,
+            "chosen": law_choice(laws), "runs": runs, "simulator": where}
+
+
+def _realisation_fit(p: _Pass, variants: Sequence[tuple[dict[str, Any],
+                                                        Callable[[Simulator], _Varied]]],
+                     replicates: Sequence[Mapping[str, Any]], tier_sim: Simulator | None
+                     ) -> tuple[list[dict[str, Any]], int, str]:
+    """The baseline's realisations (its own packing and the replicates) run as each model
+    variant of ``variants`` (``(entry, wrap)``: the entry's keys name it in the report, ``wrap``
+    makes its simulator; the first is the model's own), each variant rated by the mean BIC of
+    its realisations against the recording (``_Confirmation.bic`` of its weighted residual, no
+    parameter). The runs are made on the simulator the search ran on (anchored on the baseline
+    simulation through that simulator's own baseline run when it is a separate tier), or on
+    ``tier_sim`` when given (every realisation of every variant, anchored through its own
+    baseline run of the model's variant). Without ``tier_sim`` the model's variant's first
+    realisation is the baseline simulation itself, and its runs are those the confirmation
+    made already (``_reused_realisations``): only the other variants run. Returns each rated
+    variant's entry (with ``bic_mean``, ``bic_sd``, ``score_mean``, ``realisations``,
+    ``bics``), the runs made and where they ran."""
     c = p.c
     own_tier = tier_sim is not None
     sim = tier_sim if own_tier else p.search_sim
     anchor = p.tier.rows[0] if p.tier is not None and not own_tier else None
     reals: list[dict[str, Any]] = [{}, *[dict(r) for r in replicates]]
-    sizes: list[dict[str, Any]] = []
+    rated: list[dict[str, Any]] = []
     runs = 0
-    for f in (1.0, *[float(x) for x in factors if float(x) != 1.0]):
-        todo = reals if (f != 1.0 or anchor is not None or own_tier) else reals[1:]
-        rows = _reused_realisations(c, len(todo)) if f == 1.0 and not own_tier else None
+    for i, (entry, wrap) in enumerate(variants):
+        own = i == 0
+        todo = reals if (not own or anchor is not None or own_tier) else reals[1:]
+        rows = _reused_realisations(c, len(todo)) if own and not own_tier else None
         if rows is None:
-            scaled = _GrainScaled(sim, f)
-            outs = _run_full(scaled, [(REPLICATE, ov) for ov in todo])
-            runs += scaled.n
+            varied = wrap(sim)
+            outs = _run_full(varied, [(REPLICATE, ov) for ov in todo])
+            runs += varied.n
             rows = [c.row(REPLICATE, ov, None, o) for ov, o in zip(todo, outs)]
-        if own_tier and f == 1.0:
+        if own_tier and own:
             if "aligned" not in rows[0]:
                 raise RuntimeError("the grain fit's tier: its baseline run at the model's grains "
                                    f"failed ({rows[0].get('error', 'no signals')}), so no run "
@@ -361,42 +460,65 @@ def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[
             rows = [c.anchored(r, anchor) for r in rows]
         bics = [c.bic(r["rss"], 0) for r in rows if "rss" in r]
         scores = [r["score"] for r in rows if "rss" in r]
-        if f == 1.0 and anchor is None:
+        if own and anchor is None:
             bics.insert(0, c.bic(_full_rss(c.rep, c.rep.baseline), 0))
             scores.insert(0, float(c.rep.fit["before"]["overall"]))
         if not bics:
             continue
-        sizes.append({"radius_scale": f, "bic_mean": float(np.mean(bics)),
+        rated.append({**entry, "bic_mean": float(np.mean(bics)),
                       "bic_sd": float(np.std(bics, ddof=1)) if len(bics) > 1 else None,
                       "score_mean": float(np.mean(scores)), "realisations": len(bics),
                       "bics": [float(b) for b in bics]})
-    return {"sizes": sizes, "margin_bic": GRAIN_FIT_MARGIN, "se_factor": GRAIN_FIT_SE,
-            "chosen": grain_choice(sizes), "runs": runs,
-            "simulator": ("grain-fit tier (anchored)" if own_tier else
-                          "search tier (anchored)" if anchor is not None else "full")}
+    where = ("grain-fit tier (anchored)" if own_tier else
+             "search tier (anchored)" if anchor is not None else "full")
+    return rated, runs, where
 
 
 def grain_choice(sizes: list[dict[str, Any]]) -> float:
     """The grain-radius factor the grain fit takes from its sizes (``radius_scale``,
     ``bic_mean``, ``bic_sd`` or None, ``realisations``): another size than the model's (1)
-    only when it beats the model's mean BIC by ``GRAIN_FIT_MARGIN`` and by ``GRAIN_FIT_SE``
-    standard errors of the difference (``_se_of_difference``); of those within the margin of
-    the best, the one nearest the model's grains (the realisation means scatter by a few Delta
-    BIC between neighbouring grain sizes; moving further is not supported). Each size gets its
+    only when it beats the model's mean BIC decisively (``_beating_model``); of those, the one
+    nearest the model's grains (the realisation means scatter by a few Delta BIC between
+    neighbouring grain sizes; moving further is not supported). Each size gets its
     ``delta_bic_vs_model`` and ``se_vs_model``. 1 when the model's grains were not rated."""
     own = next((s for s in sizes if s["radius_scale"] == 1.0), None)
     if own is None:
         return 1.0
-    for s in sizes:
-        s["delta_bic_vs_model"] = own["bic_mean"] - s["bic_mean"]
-        s["se_vs_model"] = _se_of_difference(own, s)
-    best = min(s["bic_mean"] for s in sizes)
-    near = [s for s in sizes if s["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
-            and s["delta_bic_vs_model"] > GRAIN_FIT_SE * s["se_vs_model"]
-            and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
+    near = _beating_model(sizes, own)
     if not near:
         return 1.0
     return float(min(near, key=lambda s: abs(math.log(s["radius_scale"])))["radius_scale"])
+
+
+def law_choice(laws: list[dict[str, Any]]) -> dict[str, Any] | None:
+    """The contact law and modulus the law fit takes from its entries (``_law_fit``: the
+    scenario's law first, ``impact_young_factor`` None): another only when it beats the
+    scenario's law decisively (``_beating_model``); of those, the best fit. Each entry gets its
+    ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands (also when it
+    was not rated)."""
+    own = next((s for s in laws if s["impact_young_factor"] is None), None)
+    if own is None:
+        return None
+    near = _beating_model(laws, own)
+    if not near:
+        return None
+    best = min(near, key=lambda s: s["bic_mean"])
+    return {"contact_law": best["contact_law"],
+            "impact_young_factor": best["impact_young_factor"]}
+
+
+def _beating_model(entries: list[dict[str, Any]], own: dict[str, Any]) -> list[dict[str, Any]]:
+    """The entries of a realisation fit (``_realisation_fit``) that beat the model's own
+    ``own`` by ``GRAIN_FIT_MARGIN`` in mean BIC and by ``GRAIN_FIT_SE`` standard errors of the
+    difference (``_se_of_difference``), and lie within the margin of the best; every entry gets
+    its ``delta_bic_vs_model`` and ``se_vs_model``."""
+    for s in entries:
+        s["delta_bic_vs_model"] = own["bic_mean"] - s["bic_mean"]
+        s["se_vs_model"] = _se_of_difference(own, s)
+    best = min(s["bic_mean"] for s in entries)
+    return [s for s in entries if s["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
+            and s["delta_bic_vs_model"] > GRAIN_FIT_SE * s["se_vs_model"]
+            and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
 
 
 def _se_of_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> float:
@@ -479,20 +601,17 @@ def _numerics_decision(c: _Confirmation, d: _Decision, full: _FullTier,
     return d, checks
 
 
-class _GrainScaled:
-    """A simulator whose every run has its grain radius times ``factor``
-    (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has); ``n`` counts
-    the runs made: each single run, and a ``map`` batch once it returns (a batch that raises
-    is run again one by one by ``_run_full``, and those runs are the ones counted)."""
+class _Varied:
+    """A simulator whose every run has its overrides changed by ``scaled`` (here: unchanged,
+    the model's own variant); ``n`` counts the runs made: each single run, and a ``map`` batch
+    once it returns (a batch that raises is run again one by one by ``_run_full``, and those
+    runs are the ones counted)."""
 
-    def __init__(self, sim: Simulator, factor: float):
-        self.sim, self.factor, self.n = sim, float(factor), 0
+    def __init__(self, sim: Simulator):
+        self.sim, self.n = sim, 0
 
     def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
-        if self.factor == 1.0:  # the model's own grains: the very runs (and run-cache keys)
-            return dict(overrides)
-        return {**overrides,
-                RADIUS_SCALE_KEY: self.factor * float(overrides.get(RADIUS_SCALE_KEY, 1.0))}
+        return dict(overrides)
 
     def __call__(self, overrides: Mapping[str, Any]) -> Any:
         self.n += 1
@@ -506,6 +625,47 @@ class _GrainScaled:
             out = [self.sim(ov) for ov in scaled]
         self.n += len(batch)
         return out
+
+
+class _GrainScaled(_Varied):
+    """A simulator whose every run has its grain radius times ``factor``
+    (``RADIUS_SCALE_KEY``, multiplied into a factor the request already has)."""
+
+    def __init__(self, sim: Simulator, factor: float):
+        super().__init__(sim)
+        self.factor = float(factor)
+
+    def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
+        if self.factor == 1.0:  # the model's own grains: the very runs (and run-cache keys)
+            return dict(overrides)
+        return {**overrides,
+                RADIUS_SCALE_KEY: self.factor * float(overrides.get(RADIUS_SCALE_KEY, 1.0))}
+
+
+class _LawSwitched(_Varied):
+    """A simulator whose every run is in contact law ``law`` (``LAW_KEY``) with the grains'
+    impact modulus factor ``young_factor`` (``IMPACT_YOUNG_KEY``, multiplied into a factor the
+    request already has): the bed each run deposits, and its packing cache entry, stay the
+    scenario's."""
+
+    def __init__(self, sim: Simulator, law: str, young_factor: float):
+        super().__init__(sim)
+        self.law, self.young_factor = law, float(young_factor)
+
+    def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
+        return {**overrides, LAW_KEY: self.law,
+                IMPACT_YOUNG_KEY: self.young_factor * float(overrides.get(IMPACT_YOUNG_KEY, 1.0))}
+
+
+def _without_hertz_floor(full_search: bool | Mapping[str, catalogue.FullSearch]
+                         ) -> bool | Mapping[str, catalogue.FullSearch]:
+    """``full_search`` without the realisation floor's run of the other contact law
+    (``FullSearch.hertz_floor``): in a confirmation made in the law the law fit took, that run
+    is neither the other law nor at its calibrated modulus."""
+    if not isinstance(full_search, Mapping):
+        return full_search
+    return {k: replace(fs, hertz_floor=None) if fs.hertz_floor is not None else fs
+            for k, fs in full_search.items()}
 
 
 def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],
@@ -528,25 +688,37 @@ def _grain_decision(factor: float, recording_signals: Mapping[str, Signal],
 
 def _scaled_pass(factor: float, recording_signals: Mapping[str, Signal],
                  full_simulator: Simulator, search_simulator: Simulator | None,
-                 **confirm_kw) -> tuple[_Pass, _GrainScaled, _GrainScaled | None]:
+                 **confirm_kw) -> tuple[_Pass, _Varied, _Varied | None]:
     """The confirmation made again with every run's grain radius times ``factor``, its
     baseline run first (the grain check's factor, the grain fit's size): the pass and its
     scaled full and search simulators. The baseline's raw channels are not passed on
     (neither is made with the recording at another filter class)."""
-    full = _GrainScaled(full_simulator, factor)
-    search = _GrainScaled(search_simulator, factor) if search_simulator is not None else None
-    kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
+    kw = dict(confirm_kw)
     if isinstance(kw.get("full_search"), Mapping):
         # the top grain row of the levels' bed (the floor's bed stiffer below it) is one grain
         # diameter: it scales with the grains
         kw["full_search"] = {k: replace(fs, top_row_depth=fs.top_row_depth * float(factor))
                              if fs.top_row_depth is not None else fs
                              for k, fs in kw["full_search"].items()}
+    return _varied_pass(lambda sim: _GrainScaled(sim, factor), recording_signals,
+                        full_simulator, search_simulator, **kw)
+
+
+def _varied_pass(wrap: Callable[[Simulator], _Varied], recording_signals: Mapping[str, Signal],
+                 full_simulator: Simulator, search_simulator: Simulator | None,
+                 **confirm_kw) -> tuple[_Pass, _Varied, _Varied | None]:
+    """The confirmation made again with every run varied by ``wrap`` (a grain size, a contact
+    law), its baseline run first: the pass and its varied full and search simulators. The
+    baseline's raw channels are not passed on (no variant is made with the recording at
+    another filter class)."""
+    full = wrap(full_simulator)
+    search = wrap(search_simulator) if search_simulator is not None else None
+    kw = {k: v for k, v in confirm_kw.items() if k != "baseline_raw"}
     return _confirm_pass(full({}), recording_signals, full, search, **kw), full, search
 
 
-def _runs_made(full: _GrainScaled, search: _GrainScaled | None) -> int:
-    """The runs the scaled simulators of ``_scaled_pass`` have made."""
+def _runs_made(full: _Varied, search: _Varied | None) -> int:
+    """The runs the varied simulators of ``_varied_pass`` have made."""
     return full.n + (search.n if search is not None else 0)
 
 

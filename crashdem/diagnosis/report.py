@@ -309,6 +309,9 @@ def to_markdown(report, plots: list[str] | None = None,
                          + ("-" if db is None or g["radius_scale"] == 1.0 else
                             f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
                          + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
+    lfit = fit.get("law_fit")
+    if lfit and lfit.get("laws"):
+        lines += _law_fit_lines(lfit)
     real = fit.get("realisation")
     if real and real.get("runs"):
         lines += ["", f"Realisation floor ({len(real['runs'])} replicate packings of the baseline "
@@ -443,3 +446,36 @@ def write_report(report, out_dir, plots: bool = True) -> dict[str, str | list[st
     mp = out / "report.md"
     mp.write_text(to_markdown(report, pngs, d), encoding="utf-8")
     return {"json": str(jp), "md": str(mp), "plots": pngs}
+
+
+def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
+    """report.md's paragraph and table of the law fit (``fit.law_fit``)."""
+    at, ch = lfit.get("at_model_law"), lfit.get("chosen")
+    law = lfit["law"]
+    lines = ["", f"Law fit ({lfit['runs']} runs): the baseline's realisations on their own beds "
+             f"with the {law} contact law at each factor on the grains' modulus in the impact "
+             f"(soil.impact_young_factor), each rated by the mean BIC of its realisations "
+             f"against the recording; the {law} law is taken when it beats the scenario's law "
+             f"by {lfit['margin_bic']:g} and by {lfit['se_factor']:g} standard errors of the "
+             f"difference (of those within the margin of the best, the best). "
+             + (f"Run on: {lfit['simulator']}. " if lfit.get("simulator") else "")
+             + (f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; the "
+                f"confirmation above is made with every run in it (the law and its modulus are "
+                f"part of the recalibration). In the scenario's law it named "
+                + (at["named"] if at and at.get("named") else "nothing") + "."
+                if ch else "The scenario's law stands."),
+             "", ("| contact law | modulus factor | mean BIC | sd | Delta BIC vs the scenario's "
+                  "law (its standard error) | mean score | realisations |"),
+             "|---|---|---|---|---|---|---|"]
+    for g in lfit["laws"]:
+        sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
+        k = g["impact_young_factor"]
+        own = k is None
+        name = "the scenario's" if own else g["contact_law"]
+        lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | "
+                     f"{g['bic_mean']:.1f} | {'-' if sd is None else f'{sd:.1f}'} | "
+                     + ("-" if db is None or own else
+                        f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
+                     + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
+    return lines
+

@@ -153,3 +153,43 @@ def test_hertz_mindlin_scenario_runs_with_the_law_on_every_impact_material(tiny_
     f_lin = _impulse_balance(tiny_result)[2]
     n = min(len(f_lin), len(f))
     assert np.max(np.abs(f[:n] - f_lin[:n])) > 0.05 * np.max(np.abs(f_lin[:n]))
+
+
+def test_impact_young_factor_stiffens_the_impact_on_the_same_bed(tiny_result, tmp_path):
+    """``soil.impact_young_factor`` multiplies the grains' modulus (both layers) and a wall of
+    the soil's modulus in the impact phase only: the deposition spec (the packing cache key) is
+    the factor-1 scenario's, the run is on the same bed (same grains, same free surface), the
+    impactor's modulus and a wall of its own modulus are untouched. Oracles: the P-wave time
+    step scales as 1/sqrt(E) (x0.5 at 4 x), the impulse-momentum balance holds, and the stiffer
+    grains stop the sphere sooner (a higher peak contact force)."""
+    from types import SimpleNamespace
+
+    from crashdem.run import impact_materials, packing_spec, soil_material
+
+    base = ROOT / "validation/scenarios/drop_s2_h5p00.toml"
+    one = sc.load(base, TINY)
+    four = sc.load(base, dict(TINY, **{"soil.impact_young_factor": 4.0,
+                                       "scenario.name": "tiny_stiff"}))
+    assert packing_spec(four) == packing_spec(one)
+    bed = SimpleNamespace(materials=(soil_material(one), soil_material(one, lower=True)))
+    m1, m4 = impact_materials(one, bed), impact_materials(four, bed)
+    assert [b.young / a.young for a, b in zip(m1, m4)] == [4.0, 4.0, 4.0, 1.0]
+    walled = sc.load(base, dict(TINY, **{"soil.impact_young_factor": 4.0,
+                                         "container.wall_young": 3.0e7}))
+    assert impact_materials(walled, bed)[2].young == 3.0e7
+    with pytest.raises(sc.ScenarioError, match="soil.impact_young_factor"):
+        sc.load(base, dict(TINY, **{"soil.impact_young_factor": 0.0}))
+
+    import h5py
+
+    path = run_scenario(four, out_dir=tmp_path, progress=False)
+    with open_result(path) as res:
+        assert res.complete
+    with h5py.File(path, "r") as h4, h5py.File(tiny_result, "r") as h1:
+        r4, r1 = dict(h4["run"].attrs), dict(h1["run"].attrs)
+    assert r4["particles"] == r1["particles"] and r4["surface_z"] == r1["surface_z"]
+    assert r4["dt_critical"] / r1["dt_critical"] == pytest.approx(0.5, rel=1e-9)
+    dv, dv_pred, f = _impulse_balance(path)
+    assert dv == pytest.approx(dv_pred, rel=0.03, abs=0.05)
+    f_lin = _impulse_balance(tiny_result)[2]
+    assert np.max(np.abs(f)) > 1.2 * np.max(np.abs(f_lin))

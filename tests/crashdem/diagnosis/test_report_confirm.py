@@ -463,6 +463,125 @@ def test_grain_fit_confirms_at_the_grain_size_that_fits_the_recording():
     assert "The model's grains stand." in to_markdown(floor)
 
 
+def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
+    """The law fit rates the baseline's realisations in the other contact law at several moduli
+    and, when one fits the recording decisively better than the scenario's law, makes the
+    confirmation in it. The stand-in: a run in the Hertz-Mindlin law at 4 x the modulus
+    responds as a layer at 0.33 m does in the scenario's law, at 2 x as a layer at 0.45 m (the
+    ROM has no contact law). A null recording of the Hertz-Mindlin bed at 4 x is then claimed
+    a layering in the scenario's law; with the law fit (2, 4) the 4 x law fits it best and far
+    better, the confirmation in it names nothing, and every run of that confirmation is in the
+    law at 4 x. The report keeps the answer in the scenario's law, its baseline score as
+    ``before``, the runs, and the law in the recalibration. Control: a floor recorded in the
+    scenario's law, which the other law fits worse: the law stands, the floor named."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+    from crashdem.diagnosis.confirm import (
+        GRAIN_FIT_MARGIN,
+        IMPACT_YOUNG_KEY,
+        LAW_FIT_FACTORS,
+        LAW_KEY,
+    )
+    from crashdem.diagnosis.report import to_markdown
+
+    fs = {k: DROP.full_search[k] for k in ("soil_layering", "boundary_proximity")}
+    as_layer = {4.0: fs["soil_layering"].overrides(0.33), 2.0: fs["soil_layering"].overrides(0.45)}
+    calls: list = []
+    rom = _scenario_rom_simulator(calls)
+
+    def other_law_reads_as_layer(overrides):
+        ov = dict(overrides)
+        law, k = ov.pop(LAW_KEY, "linear"), float(ov.pop(IMPACT_YOUNG_KEY, 1.0))
+        if law == "hertz_mindlin" and not any(x.startswith("physics.soil_layering.") for x in ov):
+            ov.update(as_layer[k])
+        out = rom(ov)
+        calls[-1] = dict(overrides)
+        return out
+
+    def recording(ov):
+        p = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(ov))
+        return acquire(p, np.random.default_rng(5))
+
+    def run(rec, law_fit):
+        calls.clear()
+        return screen_then_confirm(simulate(RomParams()), rec, other_law_reads_as_layer,
+                                   top_k=0, full_search=fs, law_fit=law_fit)
+
+    null = recording(as_layer[4.0])
+    claimed = run(null, LAW_FIT_FACTORS)
+    assert LAW_FIT_FACTORS == ()
+    assert claimed.missing_physics == "soil_layering", claimed.decision
+    assert "law_fit" not in claimed.fit and "law_fit_simulations" not in claimed.simulations
+    assert not any(LAW_KEY in c for c in calls)
+
+    fitted = run(null, (2.0, 4.0))
+    g = fitted.fit["law_fit"]
+    laws = {s["impact_young_factor"]: s for s in g["laws"]}
+    assert set(laws) == {None, 2.0, 4.0} and g["law"] == "hertz_mindlin"
+    assert laws[4.0]["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
+    assert laws[4.0]["bic_mean"] < laws[2.0]["bic_mean"] - GRAIN_FIT_MARGIN
+    assert g["chosen"] == {"contact_law": "hertz_mindlin", "impact_young_factor": 4.0}
+    assert fitted.missing_physics is None, fitted.decision
+    assert g["at_model_law"]["named"] == "soil_layering"
+    assert fitted.fit["before"] == claimed.fit["before"]
+    assert fitted.fit["before_at_law_fit"]["overall"] > fitted.fit["before"]["overall"]
+    # the confirmation in the scenario's law, the law fit's two runs, then every run of the
+    # confirmation in the law at 4 x
+    i = next(i for i, c in enumerate(calls) if LAW_KEY in c)
+    assert i > 0 and [c.get(IMPACT_YOUNG_KEY) for c in calls[i:i + 2]] == [2.0, 4.0]
+    assert all(c[LAW_KEY] == "hertz_mindlin" and c[IMPACT_YOUNG_KEY] == 4.0
+               for c in calls[i + 2:])
+    assert fitted.simulations["law_fit_simulations"] == g["runs"] == len(calls) - i > 2
+    (recal,) = [h for h in fitted.hypotheses if h["name"] == "recalibration"]
+    assert recal["contact_law"] == "hertz_mindlin" and recal["impact_young_factor"] == 4.0
+    assert "Taken: hertz_mindlin at x4 the modulus" in to_markdown(fitted)
+    assert "In the scenario's law it named soil_layering." in to_markdown(fitted)
+
+    floor = run(recording(fs["boundary_proximity"].overrides(0.9)), (4.0,))
+    g = floor.fit["law_fit"]
+    assert g["chosen"] is None and g["runs"] == 1 and "at_model_law" not in g
+    laws = {s["impact_young_factor"]: s["bic_mean"] for s in g["laws"]}
+    assert laws[4.0] > laws[None]
+    assert floor.missing_physics == "boundary_proximity", floor.decision
+    assert "before_at_law_fit" not in floor.fit
+    assert "The scenario's law stands." in to_markdown(floor)
+    with pytest.raises(ValueError, match="law_fit_law='hooke': must be one of linear"):
+        screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(4.0,), law_fit_law="hooke")
+    with pytest.raises(ValueError, match=r"factor 0.0 is outside \[0.01, 100\]"):
+        screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(0.0,))
+
+
+def test_law_fit_drops_the_floor_run_of_the_other_law_and_the_cli_reads_its_factors():
+    """In a confirmation made in the law the law fit took, the realisation floor's run of the
+    other law (``FullSearch.hertz_floor``) is left out (it would be the chosen law again, at
+    another modulus); ``--law-fit`` names the other law of the scenario's and gives absolute
+    ``soil.impact_young_factor`` values (times the scenario's own), refusing a factor out of
+    range with the option, the value and the range."""
+    from crashdem import scenario
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import _law_fit_factors
+    from crashdem.diagnosis.confirm import _without_hertz_floor
+
+    lay = replace(DROP.full_search["soil_layering"], hertz_floor=4.0)
+    out = _without_hertz_floor({"soil_layering": lay, "x": DROP.full_search["boundary_proximity"]})
+    assert out["soil_layering"].hertz_floor is None
+    assert out["x"] is DROP.full_search["boundary_proximity"]
+    assert _without_hertz_floor(True) is True
+
+    lin = scenario.loads(SCENARIO_TOML)
+    assert _law_fit_factors(lin, None) == ((), "hertz_mindlin")
+    assert _law_fit_factors(lin, "2,4,8") == ((2.0, 4.0, 8.0), "hertz_mindlin")
+    assert _law_fit_factors(lin, "off") == ((), "hertz_mindlin")
+    hz = lin.with_overrides({"soil.contact_law": "hertz_mindlin",
+                             "soil.impact_young_factor": 4.0})
+    assert _law_fit_factors(hz, "0.25,0.5") == ((1.0, 2.0), "linear")
+    with pytest.raises(ValueError, match=r"--law-fit='2,40': factor 40 is outside \[0.0025, 25\]"):
+        _law_fit_factors(hz, "2,40")
+    with pytest.raises(ValueError, match="--law-fit='x': must be comma-separated"):
+        _law_fit_factors(lin, "x")
+
+
 def test_grain_fit_on_its_own_tier_is_anchored_through_that_tier():
     """With ``grain_fit_simulator`` the grain fit runs every realisation at every size, the
     model's grains too, on that simulator and anchors each through the tier's own baseline
@@ -901,8 +1020,8 @@ def test_full_search_levels_and_vertex():
     """``FullSearch``: levels must ascend, a log scale needs positive levels; ``located``
     excludes the last level towards the fading end and the interval before it; the refinement
     vertex of an exact parabola in Delta BIC is its maximum."""
-    from crashdem.diagnosis.confirm import _search_vertex
     from crashdem.diagnosis.catalogue import FullSearch
+    from crashdem.diagnosis.confirm import _search_vertex
 
     with pytest.raises(ValueError, match="ascending"):
         FullSearch("d", "m", ("k",), (0.5, 0.4))
@@ -1119,10 +1238,11 @@ def test_cli_diagnoses_a_force_and_penetration_recording(tmp_path):
     positive down, no acceleration or velocity -- diagnosed by the CLI: the speed offset of the
     truth (-2.5 m/s) is named, its value within 2 % (read from the differentiated free fall),
     and the report says how each model channel was obtained."""
+    from scipy.integrate import cumulative_trapezoid
+
     from crashdem import recordings
     from crashdem.diagnosis.generator import acquire
     from crashdem.signal import Signal
-    from scipy.integrate import cumulative_trapezoid
 
     rec = acquire(RomParams(speed_offset=-2.5), np.random.default_rng(14))
     a, v = rec["accel_z"], rec["velocity_z"]
@@ -1278,8 +1398,13 @@ def test_two_effects_closer_than_the_realisation_scatter_are_not_told_apart(repl
     that scatter by 0.7 the margin is ``AMBIGUITY_MARGIN`` (2) and the better one is named.
     Oracle: the rule written out (margin = max(2, scatter))."""
     from crashdem.diagnosis import AMBIGUITY_MARGIN
-    from crashdem.diagnosis.confirm import (REPLICATE, _ambiguity_margin, _Confirmation,
-                                            _FullTier, _realisation_floor)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _ambiguity_margin,
+        _Confirmation,
+        _FullTier,
+        _realisation_floor,
+    )
 
     rows = [_run("recalibration", 0.0, 0.70), _run("a", 30.0, 0.90), _run("b", 27.0, 0.90)] + [
         _run(REPLICATE, db, 0.72) for db in replicate_bics]
@@ -1410,8 +1535,13 @@ def test_a_claim_must_also_hold_on_the_search_tier(coarse_level_db, coarse_score
     stand either; at 20 and 0.73 it stands. Numbers: the Yade floor
     recording 12 at the default resolution, which named layering before."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
-                                            _realisation_floor, _SearchTier)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _Confirmation,
+        _FullTier,
+        _realisation_floor,
+        _SearchTier,
+    )
 
     tier_rows = ([_run("baseline", 0.0, 0.691)]
                  + [_run("soil_layering", db, sc, v) for db, sc, v in
@@ -1451,8 +1581,13 @@ def test_a_named_level_outranked_on_the_search_tier_is_not_told_apart(floor_db, 
     (one tier, every run judged in the same decision) the rule does not apply. Numbers: the
     Yade floor recording at 0.6 m depth on the default CLI path, which named layering before."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
-                                            _realisation_floor, _SearchTier)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _Confirmation,
+        _FullTier,
+        _realisation_floor,
+        _SearchTier,
+    )
 
     tier_rows = ([_run("baseline", 0.0, 0.60)]
                  + [_run("soil_layering", db, sc, v) for db, sc, v in
@@ -1501,8 +1636,7 @@ def test_ranking_follows_the_confirmation(confirmed):
     recalibration at 0; a level at the fading end does not count), then those it did not run
     in the screening's order. Oracle: the order worked out by hand from the numbers below."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
-                                            _realisation_floor)
+    from crashdem.diagnosis.confirm import REPLICATE, _Confirmation, _FullTier, _realisation_floor
 
     rows = ([_run("recalibration", 0.0, 0.80), _run("cohesion", -5.0, 0.78),
              _run("boundary_proximity", 40.0, 0.86, 0.7),
@@ -1567,8 +1701,13 @@ def test_an_effect_whose_profile_peaks_where_it_fades_names_nothing():
     below 38.7, or without a decisive rival (the floor's score 0.70, less than 0.02 above the
     reference's 0.691), name layering."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _ambiguity_margin, _Confirmation,
-                                            _FullTier, _realisation_floor)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _ambiguity_margin,
+        _Confirmation,
+        _FullTier,
+        _realisation_floor,
+    )
 
     def decide(deepest, floor_score=0.761, claim="soil_layering"):
         rows = ([_run("recalibration", 0.0, 0.691), _run("soil_layering", 18.0, 0.70)]
@@ -1624,8 +1763,11 @@ def test_realisation_interval_of_a_named_value():
     adopted value. The adopted uncertainty is the larger of the noise's (curvature) and the
     interval's reach (``_adopt_full_parameters``)."""
     from crashdem.diagnosis.catalogue import FullSearch
-    from crashdem.diagnosis.confirm import (_adopt_full_parameters, _profile_scatter,
-                                            _realisation_interval)
+    from crashdem.diagnosis.confirm import (
+        _adopt_full_parameters,
+        _profile_scatter,
+        _realisation_interval,
+    )
 
     deep = FullSearch("floor_depth", "m", ("k",), (0.6, 0.7, 0.8, 0.9, 1.05, 1.25))
     prof = {0.6: 10.0, 0.7: 30.0, 0.8: 40.0, 0.9: 36.0, 1.05: 20.0, 1.25: 5.0}
@@ -1867,12 +2009,16 @@ def test_auto_search_runs_on_a_small_bed_itself(tmp_path):
     the campaign bed: it scales with 1 / safety, 1 / the smallest radius and sqrt(E / rho) of
     the stiffest soil, or with 1 / an explicit step."""
     scenario = pytest.importorskip("crashdem.scenario")
-    from soil import packing as pk
-
-    from crashdem.diagnosis.cli import (AUTO_FULL_LOAD, BED_SOLID_FRACTION, _search_setup,
-                                        bed_grains, search_load)
+    from crashdem.diagnosis.cli import (
+        AUTO_FULL_LOAD,
+        BED_SOLID_FRACTION,
+        _search_setup,
+        bed_grains,
+        search_load,
+    )
     from crashdem.diagnosis.generator_dem import scenario_path
     from crashdem.run import packing_spec
+    from soil import packing as pk
 
     campaign = scenario.load(scenario_path()).with_overrides(
         {"physics.soil_layering.enabled": False})
@@ -2066,8 +2212,8 @@ def test_a_named_depth_the_numerics_check_cannot_resolve_is_withdrawn(monkeypatc
     level 0.3 m) whose reruns drift out, and the screening's claim. The screening model here
     claims the layering (it is the truth's own form), so for the withdrawal its claim is
     dropped, as when the screening names nothing."""
-    from crashdem.diagnosis import confirm
     from crashdem import scenario
+    from crashdem.diagnosis import confirm
     from crashdem.diagnosis.catalogue import DROP
     from crashdem.diagnosis.cli import rom_from_scenario
     from crashdem.diagnosis.confirm import _Confirmation, _Decision
@@ -2394,8 +2540,13 @@ def test_a_screened_candidate_must_also_hold_on_the_search_tier(level_105, level
     ``validation/diagnose_cost.py`` (contact restitution 0.15 at 0.075 m grains), which named
     ``boundary_proximity`` before (session 38)."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
-    from crashdem.diagnosis.confirm import (REPLICATE, _Confirmation, _FullTier,
-                                            _realisation_floor, _SearchTier)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _Confirmation,
+        _FullTier,
+        _realisation_floor,
+        _SearchTier,
+    )
 
     tier_rows = ([_run("baseline", 0.0, 0.832)]
                  + [_run("boundary_proximity", db, sc, v) for db, sc, v in
@@ -2437,9 +2588,14 @@ def test_a_candidate_the_screening_left_off_runs_at_its_search_level():
     nominal 1.2 m and was named there while the search tier stood at 0.9 m."""
     from crashdem.diagnosis.catalogue import DROP_FULL_SEARCH as FS
     from crashdem.diagnosis.catalogue import drop_catalogue
-    from crashdem.diagnosis.confirm import (REPLICATE, _adopt_full_parameters, _Confirmation,
-                                            _confirmation_overrides, _realisation_floor,
-                                            _SearchTier)
+    from crashdem.diagnosis.confirm import (
+        REPLICATE,
+        _adopt_full_parameters,
+        _Confirmation,
+        _confirmation_overrides,
+        _realisation_floor,
+        _SearchTier,
+    )
 
     fs = FS["boundary_proximity"]
     levels = [_run("boundary_proximity", db, sc, v) for db, sc, v in
