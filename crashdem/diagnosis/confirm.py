@@ -493,16 +493,19 @@ def grain_choice(sizes: list[dict[str, Any]]) -> float:
 def law_choice(laws: list[dict[str, Any]]) -> dict[str, Any] | None:
     """The contact law and modulus the law fit takes from its entries (``_law_fit``: the
     scenario's law first, ``impact_young_factor`` None): another only when it beats the
-    scenario's law decisively (``_beating_model``); of those, the best fit. Each entry gets its
-    ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands (also when it
-    was not rated)."""
+    scenario's law decisively (``_beating_model``); of those (all within the margin of the
+    best BIC, which does not tell them apart), the one the recording rates best (mean ISO/TS
+    18571 score of its realisations). Measured on a Yade Hertz-Mindlin null (13.7 m, seed 30):
+    4 and 8 x the modulus within 5.6 in BIC, rated 0.755 and 0.701 (the truth: 4 x). Each entry
+    gets its ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands (also
+    when it was not rated)."""
     own = next((s for s in laws if s["impact_young_factor"] is None), None)
     if own is None:
         return None
     near = _beating_model(laws, own)
     if not near:
         return None
-    best = min(near, key=lambda s: s["bic_mean"])
+    best = max(near, key=lambda s: s["score_mean"])
     return {"contact_law": best["contact_law"],
             "impact_young_factor": best["impact_young_factor"]}
 

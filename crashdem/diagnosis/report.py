@@ -457,7 +457,7 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
              f"(soil.impact_young_factor), each rated by the mean BIC of its realisations "
              f"against the recording; the {law} law is taken when it beats the scenario's law "
              f"by {lfit['margin_bic']:g} and by {lfit['se_factor']:g} standard errors of the "
-             f"difference (of those within the margin of the best, the best). "
+             f"difference (of those within the margin of the best BIC, the best mean score). "
              + (f"Run on: {lfit['simulator']}. " if lfit.get("simulator") else "")
              + (f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; the "
                 f"confirmation above is made with every run in it (the law and its modulus are "

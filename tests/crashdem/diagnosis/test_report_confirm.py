@@ -552,8 +552,9 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
         screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(0.0,))
 
 
-def test_law_fit_drops_the_floor_run_of_the_other_law_and_the_cli_reads_its_factors():
-    """In a confirmation made in the law the law fit took, the realisation floor's run of the
+def test_law_fit_choice_floor_run_and_cli_factors():
+    """``law_choice`` takes another law only when decisive, and of the decisive moduli the best
+    rated within the BIC margin. In a confirmation made in the law the law fit took, the realisation floor's run of the
     other law (``FullSearch.hertz_floor``) is left out (it would be the chosen law again, at
     another modulus); ``--law-fit`` names the other law of the scenario's and gives absolute
     ``soil.impact_young_factor`` values (times the scenario's own), refusing a factor out of
@@ -561,13 +562,31 @@ def test_law_fit_drops_the_floor_run_of_the_other_law_and_the_cli_reads_its_fact
     from crashdem import scenario
     from crashdem.diagnosis.catalogue import DROP
     from crashdem.diagnosis.cli import _law_fit_factors
-    from crashdem.diagnosis.confirm import _without_hertz_floor
+    from crashdem.diagnosis.confirm import _without_hertz_floor, law_choice
 
     lay = replace(DROP.full_search["soil_layering"], hertz_floor=4.0)
     out = _without_hertz_floor({"soil_layering": lay, "x": DROP.full_search["boundary_proximity"]})
     assert out["soil_layering"].hertz_floor is None
     assert out["x"] is DROP.full_search["boundary_proximity"]
     assert _without_hertz_floor(True) is True
+
+    # law_choice: decisive against the scenario's law (margin and 2 standard errors), then
+    # of those within the margin of the best BIC the best rated (a Yade Hertz-Mindlin null's
+    # table, 13.7 m seed 30: 4 x, the truth's modulus, over 8 x)
+    def law(k, mean, sd, score):
+        return {"contact_law": "scenario" if k is None else "hertz_mindlin",
+                "impact_young_factor": k, "bic_mean": mean, "bic_sd": sd,
+                "score_mean": score, "realisations": 5}
+
+    seed30 = [law(None, 70.5, 5.7, 0.784), law(2.0, 79.4, 3.5, 0.740),
+              law(4.0, 57.7, 5.4, 0.755), law(8.0, 52.1, 5.2, 0.701)]
+    assert law_choice(seed30) == {"contact_law": "hertz_mindlin", "impact_young_factor": 4.0}
+    assert seed30[2]["delta_bic_vs_model"] == pytest.approx(12.8)
+    seed30[2]["bic_mean"] = 58.2  # 6.1 above the best: beyond the margin, 8 x taken
+    assert law_choice(seed30)["impact_young_factor"] == 8.0
+    # decisive in BIC but not beyond two standard errors of the packings' scatter
+    assert law_choice([law(None, 70.5, 12.0, 0.78), law(4.0, 62.0, 12.0, 0.80)]) is None
+    assert law_choice([law(4.0, 62.0, 1.0, 0.80)]) is None  # the scenario's law not rated
 
     lin = scenario.loads(SCENARIO_TOML)
     assert _law_fit_factors(lin, None) == ((), "hertz_mindlin")
