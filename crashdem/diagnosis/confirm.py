@@ -313,15 +313,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                 f, recording_signals, full_simulator, search_simulator, top_k=top_k,
                 full_search=full_search, replicates=replicates, level_beds=level_beds,
                 numerics=numerics, **diagnose_kw)
-            fitted["at_model_grains"] = {
-                "named": at_model.d.confirmed,
-                "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
-                "before": at_model.rep.fit["before"],
-                "full_simulations": at_model.rep.simulations.get("full_simulations")}
-            fitted["runs"] += _runs_made(full_simulator, search_simulator)
-            for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
-                p.rep.fit[f"{key}_at_grain_fit"] = p.rep.fit[key]
-                p.rep.fit[key] = at_model.rep.fit[key]
+            _moved(fitted, "at_model_grains", "grain_fit", at_model, p,
+                   _runs_made(full_simulator, search_simulator))
     lawed = None
     if law_fit and not p.c.model_free and not p.c.cfc_key:
         lawed = _law_fit(p, law_fit, law_fit_law, replicates)
@@ -333,15 +326,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                 lambda sim: _LawSwitched(sim, law_fit_law, k), recording_signals,
                 full_simulator, search_simulator, top_k=top_k, full_search=full_search,
                 replicates=replicates, level_beds=level_beds, numerics=numerics, **diagnose_kw)
-            lawed["at_model_law"] = {
-                "named": at_model.d.confirmed,
-                "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
-                "before": at_model.rep.fit["before"],
-                "full_simulations": at_model.rep.simulations.get("full_simulations")}
-            lawed["runs"] += _runs_made(full_simulator, search_simulator)
-            for key in ("before", "residual_rms_sigma_before"):  # the scenario's own baseline
-                p.rep.fit[f"{key}_at_law_fit"] = p.rep.fit[key]
-                p.rep.fit[key] = at_model.rep.fit[key]
+            _moved(lawed, "at_model_law", "law_fit", at_model, p,
+                   _runs_made(full_simulator, search_simulator))
     rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
     answers: dict[float, dict[str, Any]] = {}
 
@@ -387,6 +373,22 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                     h["contact_law"] = law_fit_law
                     h["impact_young_factor"] = lawed["chosen"]["impact_young_factor"]
     return rep
+
+
+def _moved(fitted: dict[str, Any], at: str, name: str, at_model: _Pass, p: _Pass,
+           runs: int) -> None:
+    """Record in a realisation fit's entry ``fitted`` (the grain fit's, the law fit's) that the
+    confirmation ``p`` was made again in the variant it took: the answer of the confirmation
+    ``at_model`` before it under ``at``, the ``runs`` of ``p`` added, and ``p``'s report given
+    the scenario's own baseline as ``fit.before`` (its own kept as ``before_at_<name>``)."""
+    fitted[at] = {"named": at_model.d.confirmed,
+                  "ambiguous": list(at_model.d.ambiguous) if at_model.d.ambiguous else None,
+                  "before": at_model.rep.fit["before"],
+                  "full_simulations": at_model.rep.simulations.get("full_simulations")}
+    fitted["runs"] += runs
+    for key in ("before", "residual_rms_sigma_before"):
+        p.rep.fit[f"{key}_at_{name}"] = p.rep.fit[key]
+        p.rep.fit[key] = at_model.rep.fit[key]
 
 
 def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[str, Any]],
