@@ -554,9 +554,10 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
 
 def test_law_fit_choice_floor_run_and_cli_factors():
     """``law_choice`` takes another law only when decisive, and of the decisive moduli the best
-    rated within the BIC margin. In a confirmation made in the law the law fit took, the realisation floor's run of the
-    other law (``FullSearch.hertz_floor``) is left out (it would be the chosen law again, at
-    another modulus); ``--law-fit`` names the other law of the scenario's and gives absolute
+    rated within the BIC margin. In a confirmation made in the law the law fit took, the
+    realisation floor's run of the other law (``FullSearch.hertz_floor``) is left out (it
+    would be the chosen law again, at another modulus); ``--law-fit`` names the other law of
+    the scenario's and gives absolute
     ``soil.impact_young_factor`` values (times the scenario's own), refusing a factor out of
     range with the option, the value and the range."""
     from crashdem import scenario
