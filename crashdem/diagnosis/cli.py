@@ -547,26 +547,15 @@ def _law_fit_factors(scen, text: str | None) -> tuple[tuple[float, ...], str]:
     realisations run in the other contact law (default ``confirm.LAW_FIT_FACTORS``; ``off`` =
     none), as the absolute ``soil.impact_young_factor`` values (times the scenario's own), and
     that law: Hertz-Mindlin for a linear scenario, linear for a Hertz-Mindlin one."""
-    from crashdem.diagnosis.confirm import IMPACT_YOUNG_KEY, LAW_FIT_FACTORS
+    from crashdem.diagnosis.confirm import IMPACT_YOUNG_KEY, LAW_FIT_FACTORS, impact_young_range
 
     own = float(scen[IMPACT_YOUNG_KEY])
     law = "linear" if scen["soil.contact_law"] == "hertz_mindlin" else "hertz_mindlin"
-    if text is None:
-        return tuple(own * k for k in LAW_FIT_FACTORS), law
-    if text.strip().lower() in ("off", "none", ""):
-        return (), law
-    lo, hi = 0.01 / own, 100.0 / own
-    try:
-        out = tuple(float(v) for v in text.split(","))
-    except ValueError:
-        raise ValueError(f"--law-fit={text!r}: must be comma-separated factors on the grains' "
-                         f"modulus in [{lo:g}, {hi:g}] (e.g. 2,4,8) or off") from None
-    bad = [k for k in out if not (math.isfinite(k) and lo <= k <= hi)]
-    if bad:
-        raise ValueError(f"--law-fit={text!r}: factor {bad[0]:g} is outside [{lo:g}, {hi:g}] "
-                         f"(with the scenario's {IMPACT_YOUNG_KEY}={own:g}, the modulus factor "
-                         "must stay in [0.01, 100])")
-    return tuple(own * k for k in out), law
+    lo, hi = impact_young_range()
+    out = _factors(text, "--law-fit", lo / own, hi / own, "factors on the grains' modulus",
+                   "2,4,8", f"with the scenario's {IMPACT_YOUNG_KEY}={own:g}, the modulus "
+                   f"factor must stay in [{lo:g}, {hi:g}]")
+    return tuple(own * k for k in (LAW_FIT_FACTORS if out is None else out)), law
 
 
 def _radius_factors(text: str | None, opt: str, default: Sequence[float]
@@ -575,20 +564,30 @@ def _radius_factors(text: str | None, opt: str, default: Sequence[float]
     default), each in ``distributed.RADIUS_SCALE_RANGE``."""
     from crashdem.diagnosis.distributed import RADIUS_SCALE_RANGE
 
+    out = _factors(text, opt, *RADIUS_SCALE_RANGE, "grain-radius factors", "0.9,1.1",
+                   "a factor on the scenario's grain radius")
+    return tuple(default) if out is None else out
+
+
+def _factors(text: str | None, opt: str, lo: float, hi: float, what: str, example: str,
+             why: str) -> tuple[float, ...] | None:
+    """Comma-separated factors of option ``opt`` (None: not given; ``off`` = none), each in
+    [lo, hi]; a value that is not a number, or out of range, is refused naming the option, the
+    value and the range (``what``: the factors' name, ``example``: a valid value, ``why``: what
+    the range means)."""
     if text is None:
-        return tuple(default)
+        return None
     if text.strip().lower() in ("off", "none", ""):
         return ()
-    lo, hi = RADIUS_SCALE_RANGE
     try:
         out = tuple(float(v) for v in text.split(","))
     except ValueError:
-        raise ValueError(f"{opt}={text!r}: must be comma-separated grain-radius "
-                         f"factors in [{lo:g}, {hi:g}] (e.g. 0.9,1.1) or off") from None
+        raise ValueError(f"{opt}={text!r}: must be comma-separated {what} in [{lo:g}, {hi:g}] "
+                         f"(e.g. {example}) or off") from None
     bad = [f for f in out if not lo <= f <= hi]
     if bad:
-        raise ValueError(f"{opt}={text!r}: factor {bad[0]:g} is outside "
-                         f"[{lo:g}, {hi:g}] (a factor on the scenario's grain radius)")
+        raise ValueError(f"{opt}={text!r}: factor {bad[0]:g} is outside [{lo:g}, {hi:g}] "
+                         f"({why})")
     return out
 
 

@@ -41,7 +41,7 @@ from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
 from crashdem.diagnosis.mismatch import (SIMULATED_SPAN, align, describe_changes, feature_changes,
                                          onset_time)
 from crashdem.signal import Signal
-from soil.contact_laws import rebound_restitution
+from soil.contact_laws import CONTACT_LAWS, rebound_restitution
 
 __all__ = ["screen_then_confirm", "CONFIRM_MIN_GAIN", "AMBIGUITY_MARGIN", "SEARCH_PROMOTE",
            "REPLICATE", "STIFFER", "REALISATION_MARGIN", "SPEED_CHECK_SIGMAS",
@@ -133,8 +133,6 @@ LAW_FIT_FACTORS: tuple[float, ...] = ()
 #: the scenario keys the law fit sets on every run of the other law
 LAW_KEY = "soil.contact_law"
 IMPACT_YOUNG_KEY = "soil.impact_young_factor"
-#: the contact laws a scenario may name (``soil.contact_law``)
-CONTACT_LAWS = ("linear", "hertz_mindlin")
 
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
@@ -290,10 +288,12 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if law_fit_law not in CONTACT_LAWS:
         raise ValueError(f"law_fit_law={law_fit_law!r}: must be one of {', '.join(CONTACT_LAWS)}"
                          " (the other contact law of the law fit)")
-    bad = [k for k in law_fit if not (math.isfinite(float(k)) and 0.01 <= float(k) <= 100.0)]
+    lo, hi = impact_young_range()
+    bad = [k for k in law_fit if not lo <= float(k) <= hi]
     if bad:
-        raise ValueError(f"law_fit={tuple(law_fit)!r}: factor {bad[0]!r} is outside [0.01, 100] "
-                         f"(the grains' impact modulus factor, {IMPACT_YOUNG_KEY})")
+        raise ValueError(f"law_fit={tuple(law_fit)!r}: factor {bad[0]!r} is outside "
+                         f"[{lo:g}, {hi:g}] (the grains' impact modulus factor, "
+                         f"{IMPACT_YOUNG_KEY})")
     if level_beds is None:
         level_beds = SEARCH_TIER_LEVEL_BEDS if search_simulator is not None else LEVEL_BEDS
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
@@ -373,6 +373,15 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                     h["contact_law"] = law_fit_law
                     h["impact_young_factor"] = lawed["chosen"]["impact_young_factor"]
     return rep
+
+
+def impact_young_range() -> tuple[float, float]:
+    """The allowed ``soil.impact_young_factor`` (``IMPACT_YOUNG_KEY``), from the scenario
+    schema."""
+    from crashdem.scenario import SCHEMA
+
+    field = SCHEMA["soil"]["impact_young_factor"]
+    return float(field.lo), float(field.hi)
 
 
 def _moved(fitted: dict[str, Any], at: str, name: str, at_model: _Pass, p: _Pass,

@@ -303,12 +303,8 @@ def to_markdown(report, plots: list[str] | None = None,
                        "standard error) | mean score | realisations |"),
                   "|---|---|---|---|---|---|"]
         for g in gfit["sizes"]:
-            sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
-            lines.append(f"| x{g['radius_scale']:g} | {g['bic_mean']:.1f} | "
-                         f"{'-' if sd is None else f'{sd:.1f}'} | "
-                         + ("-" if db is None or g["radius_scale"] == 1.0 else
-                            f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
-                         + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
+            lines.append(f"| x{g['radius_scale']:g} | "
+                         + _rated_cells(g, g["radius_scale"] == 1.0))
     lfit = fit.get("law_fit")
     if lfit and lfit.get("laws"):
         lines += _law_fit_lines(lfit)
@@ -468,14 +464,20 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
                   "law (its standard error) | mean score | realisations |"),
              "|---|---|---|---|---|---|---|"]
     for g in lfit["laws"]:
-        sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
         k = g["impact_young_factor"]
         own = k is None
         name = "the scenario's" if own else g["contact_law"]
-        lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | "
-                     f"{g['bic_mean']:.1f} | {'-' if sd is None else f'{sd:.1f}'} | "
-                     + ("-" if db is None or own else
-                        f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
-                     + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
+        lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | " + _rated_cells(g, own))
     return lines
+
+
+def _rated_cells(g: dict[str, Any], own: bool) -> str:
+    """The cells of one rated variant of a realisation fit (``fit.grain_fit.sizes``,
+    ``fit.law_fit.laws``) from its mean BIC on: mean BIC, sd, Delta BIC vs the model's own
+    variant with its standard error ("-" for the model's own), mean score, realisations."""
+    sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
+    return (f"{g['bic_mean']:.1f} | {'-' if sd is None else f'{sd:.1f}'} | "
+            + ("-" if db is None or own else
+               f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
+            + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
 
