@@ -253,10 +253,12 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--law-fit", default=None, metavar="K[,K...]|off",
                    help="run the baseline and its replicate packings on their own beds with the "
                         "other contact law (Hertz-Mindlin for a linear scenario, linear for a "
-                        "Hertz-Mindlin one) at each factor K on the grains' modulus; when one "
-                        "fits the recording decisively better than the scenario's law, make the "
-                        "whole confirmation in it (default off; e.g. 2,4,8 for Hertz-Mindlin "
-                        "against a linear law calibrated on the same test)")
+                        "Hertz-Mindlin one), and in the scenario's law, at each factor K on "
+                        "the grains' modulus; when one fits the recording decisively better "
+                        "than the scenario's law at its modulus, make the whole confirmation "
+                        "in it (the other law only when it also beats the scenario's law at "
+                        "its best modulus; default off; e.g. 2,4,8 for Hertz-Mindlin against a "
+                        "linear law calibrated on the same test)")
     d.add_argument("--grain-fit-tier", default=None, choices=("search", "tier", "full"),
                    help="where the grain fit runs when the search runs on the coarse tier: "
                         "search (default) on that tier; tier = on the scenario's own grains in "

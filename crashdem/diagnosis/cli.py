@@ -402,7 +402,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
         grain = _grain_scales(getattr(args, "grain_check", None))
         gfit = _grain_fit_scales(getattr(args, "grain_fit", None))
-        lfit, lfit_law = _law_fit_factors(scen, getattr(args, "law_fit", None))
+        lfit, lfit_law, lfit_own = _law_fit_factors(scen, getattr(args, "law_fit", None))
         level_beds = _level_beds(getattr(args, "level_beds", None))
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:
@@ -418,6 +418,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   grain_check=grain, grain_fit=gfit,
                                   grain_fit_simulator=gfit_sim,
                                   law_fit=lfit, law_fit_law=lfit_law,
+                                  law_fit_stiffness=lfit_own,
                                   grain_agree=getattr(args, "grain_check_agree", None)
                                   or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
@@ -542,11 +543,13 @@ def _grain_fit_scales(text: str | None) -> tuple[float, ...]:
     return _radius_factors(text, "--grain-fit", GRAIN_FIT_SCALES)
 
 
-def _law_fit_factors(scen, text: str | None) -> tuple[tuple[float, ...], str]:
+def _law_fit_factors(scen, text: str | None
+                     ) -> tuple[tuple[float, ...], str, tuple[float, ...]]:
     """``--law-fit``: the factors on the scenario's grain modulus at which the baseline's
     realisations run in the other contact law (default ``confirm.LAW_FIT_FACTORS``; ``off`` =
-    none), as the absolute ``soil.impact_young_factor`` values (times the scenario's own), and
-    that law: Hertz-Mindlin for a linear scenario, linear for a Hertz-Mindlin one."""
+    none), as the absolute ``soil.impact_young_factor`` values (times the scenario's own);
+    that law: Hertz-Mindlin for a linear scenario, linear for a Hertz-Mindlin one; and the
+    same values but the scenario's own (factor 1), at which they run in the scenario's law."""
     from crashdem.diagnosis.confirm import IMPACT_YOUNG_KEY, LAW_FIT_FACTORS, impact_young_range
 
     own = float(scen[IMPACT_YOUNG_KEY])
@@ -555,7 +558,8 @@ def _law_fit_factors(scen, text: str | None) -> tuple[tuple[float, ...], str]:
     out = _factors(text, "--law-fit", lo / own, hi / own, "factors on the grains' modulus",
                    "2,4,8", f"with the scenario's {IMPACT_YOUNG_KEY}={own:g}, the modulus "
                    f"factor must stay in [{lo:g}, {hi:g}]")
-    return tuple(own * k for k in (LAW_FIT_FACTORS if out is None else out)), law
+    ks = LAW_FIT_FACTORS if out is None else out
+    return tuple(own * k for k in ks), law, tuple(own * k for k in ks if k != 1.0)
 
 
 def _radius_factors(text: str | None, opt: str, default: Sequence[float]

@@ -133,6 +133,8 @@ LAW_FIT_FACTORS: tuple[float, ...] = ()
 #: the scenario keys the law fit sets on every run of the other law
 LAW_KEY = "soil.contact_law"
 IMPACT_YOUNG_KEY = "soil.impact_young_factor"
+#: the name of the scenario's own contact law in the law fit's entries (``fit.law_fit.laws``)
+OWN_LAW = "scenario"
 
 #: beds per search level of an effect whose levels deposit their own bed
 #: (``FullSearch.deposits``: a floor or interface depth): the level's runs with the baseline's
@@ -174,6 +176,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         grain_fit_simulator: Simulator | None = None,
                         law_fit: Sequence[float] = LAW_FIT_FACTORS,
                         law_fit_law: str = "hertz_mindlin",
+                        law_fit_stiffness: Sequence[float] | None = None,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -253,14 +256,22 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     law_fit : the grains' impact modulus factors (``soil.impact_young_factor``, absolute) of
         the law fit (``LAW_FIT_FACTORS``; ``()`` skips it): after the grain fit, and under the
         same conditions, the baseline's realisations run again on the simulator the search ran
-        on with the contact law ``law_fit_law`` at each factor, each rated like a grain size;
-        when one beats the scenario's law decisively (``law_choice``), the confirmation is made
-        again with every run in that law at that modulus (the realisation floor's own run of
-        the other law, ``FullSearch.hertz_floor``, is then left out) and its answer is the
+        on with the contact law ``law_fit_law`` at each factor (and in the scenario's own law
+        at each factor of ``law_fit_stiffness``), each rated like a grain size; when one beats
+        the scenario's law decisively (``law_choice``), the confirmation is made again with
+        every run in that law at that modulus (in the other law, the realisation floor's own
+        run of that law, ``FullSearch.hertz_floor``, is left out) and its answer is the
         report's; the law and modulus are then part of the recalibration (``fit.law_fit``:
         each law's BIC, the one chosen, the answer at the scenario's law; ``fit.before`` stays
         the scenario's own baseline). The grain check then runs in the law taken
     law_fit_law : the other contact law of the law fit (``CONTACT_LAWS``)
+    law_fit_stiffness : the impact modulus factors (absolute) at which the law fit also rates
+        the scenario's own law (None: those of ``law_fit`` other than 1; ``()``: none). The
+        other law is then taken only when it also beats the scenario's law at its best-rated
+        modulus decisively; when the scenario's law at another modulus is what beats it, the
+        law stands and that modulus is taken: a recalibration of the soil's stiffness, made as
+        the law's is (``law_choice``). A law fit without them cannot tell a contact law from
+        a stiffness (measured on Yade's linear recordings: 9 of 12 moved to Hertz-Mindlin)
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -288,12 +299,15 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if law_fit_law not in CONTACT_LAWS:
         raise ValueError(f"law_fit_law={law_fit_law!r}: must be one of {', '.join(CONTACT_LAWS)}"
                          " (the other contact law of the law fit)")
+    if law_fit_stiffness is None:
+        law_fit_stiffness = tuple(float(k) for k in law_fit if float(k) != 1.0)
     lo, hi = impact_young_range()
-    bad = [k for k in law_fit if not lo <= float(k) <= hi]
-    if bad:
-        raise ValueError(f"law_fit={tuple(law_fit)!r}: factor {bad[0]!r} is outside "
-                         f"[{lo:g}, {hi:g}] (the grains' impact modulus factor, "
-                         f"{IMPACT_YOUNG_KEY})")
+    for name, factors in (("law_fit", law_fit), ("law_fit_stiffness", law_fit_stiffness)):
+        bad = [k for k in factors if not lo <= float(k) <= hi]
+        if bad:
+            raise ValueError(f"{name}={tuple(factors)!r}: factor {bad[0]!r} is outside "
+                             f"[{lo:g}, {hi:g}] (the grains' impact modulus factor, "
+                             f"{IMPACT_YOUNG_KEY})")
     if level_beds is None:
         level_beds = SEARCH_TIER_LEVEL_BEDS if search_simulator is not None else LEVEL_BEDS
     if isinstance(level_beds, bool) or not isinstance(level_beds, int) or level_beds < 1:
@@ -317,13 +331,15 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                    _runs_made(full_simulator, search_simulator))
     lawed = None
     if law_fit and not p.c.model_free and not p.c.cfc_key:
-        lawed = _law_fit(p, law_fit, law_fit_law, replicates)
+        lawed = _law_fit(p, law_fit, law_fit_law, replicates, law_fit_stiffness)
         if lawed["chosen"] is not None:
             k = lawed["chosen"]["impact_young_factor"]
+            taken = law_fit_law if lawed["chosen"]["contact_law"] != OWN_LAW else None
             at_model = p
-            full_search = _without_hertz_floor(full_search)
+            if taken is not None:
+                full_search = _without_hertz_floor(full_search)
             p, full_simulator, search_simulator = _varied_pass(
-                lambda sim: _LawSwitched(sim, law_fit_law, k), recording_signals,
+                lambda sim: _LawSwitched(sim, taken, k), recording_signals,
                 full_simulator, search_simulator, top_k=top_k, full_search=full_search,
                 replicates=replicates, level_beds=level_beds, numerics=numerics, **diagnose_kw)
             _moved(lawed, "at_model_law", "law_fit", at_model, p,
@@ -367,10 +383,11 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
     if lawed is not None:
         rep.fit["law_fit"] = lawed
         rep.simulations["law_fit_simulations"] = lawed["runs"]
-        if lawed["chosen"] is not None:  # so is the law taken, at its modulus
+        if lawed["chosen"] is not None:  # so is the law taken (or kept), at its modulus
             for h in rep.hypotheses:
                 if h["name"] == RECALIBRATION.name:
-                    h["contact_law"] = law_fit_law
+                    if lawed["chosen"]["contact_law"] != OWN_LAW:
+                        h["contact_law"] = law_fit_law
                     h["impact_young_factor"] = lawed["chosen"]["impact_young_factor"]
     return rep
 
@@ -415,13 +432,17 @@ def _grain_fit(p: _Pass, factors: Sequence[float], replicates: Sequence[Mapping[
 
 
 def _law_fit(p: _Pass, factors: Sequence[float], law: str,
-             replicates: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+             replicates: Sequence[Mapping[str, Any]], own_factors: Sequence[float] = ()
+             ) -> dict[str, Any]:
     """The law fit of ``screen_then_confirm``: the baseline's realisations in the scenario's
-    own law, then in contact law ``law`` at each impact modulus factor, rated by
-    ``_realisation_fit`` on the simulator the search ran on; the one taken is
-    ``law_choice``'s (None: the scenario's law stands)."""
+    own law (``OWN_LAW``), in that law at each impact modulus factor of ``own_factors``, then
+    in contact law ``law`` at each factor of ``factors``, rated by ``_realisation_fit`` on the
+    simulator the search ran on; the one taken is ``law_choice``'s (None: the scenario's law
+    stands at its modulus)."""
     variants: list[tuple[dict[str, Any], Callable[[Simulator], _Varied]]] = [
-        ({"contact_law": "scenario", "impact_young_factor": None}, _Varied)]
+        ({"contact_law": OWN_LAW, "impact_young_factor": None}, _Varied)]
+    variants += [({"contact_law": OWN_LAW, "impact_young_factor": float(k)},
+                  lambda sim, k=float(k): _LawSwitched(sim, None, k)) for k in own_factors]
     variants += [({"contact_law": law, "impact_young_factor": float(k)},
                   lambda sim, k=float(k): _LawSwitched(sim, law, k)) for k in factors]
     laws, runs, where = _realisation_fit(p, variants, replicates, None)
@@ -503,36 +524,55 @@ def grain_choice(sizes: list[dict[str, Any]]) -> float:
 
 def law_choice(laws: list[dict[str, Any]]) -> dict[str, Any] | None:
     """The contact law and modulus the law fit takes from its entries (``_law_fit``: the
-    scenario's law first, ``impact_young_factor`` None): another only when it beats the
-    scenario's law decisively (``_beating_model``); of those (all within the margin of the
-    best BIC, which does not tell them apart), the one the recording rates best (mean ISO/TS
-    18571 score of its realisations). Measured on a Yade Hertz-Mindlin null (13.7 m, seed 30):
-    4 and 8 x the modulus within 5.6 in BIC, rated 0.755 and 0.701 (the truth: 4 x). Each entry
-    gets its ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands (also
-    when it was not rated)."""
+    scenario's law (``OWN_LAW``) first, ``impact_young_factor`` None; then that law at other
+    moduli, and the other law at its moduli). Another entry only when it beats the scenario's
+    own decisively (``_beating_model``); of those (all within the margin of the best BIC,
+    which does not tell them apart), the one the recording rates best (mean ISO/TS 18571 score
+    of its realisations). The other law is taken only when it also beats the scenario's law at
+    its best-rated modulus decisively (the same rule, ``delta_bic_vs_own_law`` and
+    ``se_vs_own_law`` on each of its entries); otherwise a modulus of the scenario's law that
+    beats the scenario's own is taken (the law stands, its stiffness is recalibrated), or
+    nothing. Measured on a Yade Hertz-Mindlin null (13.7 m, seed 30): 4 and 8 x the modulus
+    within 5.6 in BIC, rated 0.755 and 0.701 (the truth: 4 x). Each entry gets its
+    ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands at its own
+    modulus (also when it was not rated)."""
     own = next((s for s in laws if s["impact_young_factor"] is None), None)
     if own is None:
         return None
     near = _beating_model(laws, own)
-    if not near:
+    same = [s for s in laws if s["contact_law"] == own["contact_law"]]
+    best_own = min(same, key=lambda s: s["bic_mean"])
+    other = [s for s in laws if s["contact_law"] != own["contact_law"]]
+    if len(same) > 1:
+        for s in other:
+            s["delta_bic_vs_own_law"] = best_own["bic_mean"] - s["bic_mean"]
+            s["se_vs_own_law"] = _se_of_difference(best_own, s)
+    switch = [s for s in near if s in other and _decisive_over(s, best_own)]
+    pick = switch or [s for s in near if s in same]
+    if not pick:
         return None
-    best = max(near, key=lambda s: s["score_mean"])
+    best = max(pick, key=lambda s: s["score_mean"])
     return {"contact_law": best["contact_law"],
             "impact_young_factor": best["impact_young_factor"]}
 
 
 def _beating_model(entries: list[dict[str, Any]], own: dict[str, Any]) -> list[dict[str, Any]]:
     """The entries of a realisation fit (``_realisation_fit``) that beat the model's own
-    ``own`` by ``GRAIN_FIT_MARGIN`` in mean BIC and by ``GRAIN_FIT_SE`` standard errors of the
-    difference (``_se_of_difference``), and lie within the margin of the best; every entry gets
-    its ``delta_bic_vs_model`` and ``se_vs_model``."""
+    ``own`` decisively (``_decisive_over``) and lie within the margin of the best; every entry
+    gets its ``delta_bic_vs_model`` and ``se_vs_model``."""
     for s in entries:
         s["delta_bic_vs_model"] = own["bic_mean"] - s["bic_mean"]
         s["se_vs_model"] = _se_of_difference(own, s)
     best = min(s["bic_mean"] for s in entries)
-    return [s for s in entries if s["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
-            and s["delta_bic_vs_model"] > GRAIN_FIT_SE * s["se_vs_model"]
+    return [s for s in entries if _decisive_over(s, own)
             and s["bic_mean"] - best <= GRAIN_FIT_MARGIN]
+
+
+def _decisive_over(s: Mapping[str, Any], ref: Mapping[str, Any]) -> bool:
+    """Whether realisation-fit entry ``s`` beats ``ref`` by ``GRAIN_FIT_MARGIN`` in mean BIC
+    and by ``GRAIN_FIT_SE`` standard errors of the difference (``_se_of_difference``)."""
+    d = ref["bic_mean"] - s["bic_mean"]
+    return d > GRAIN_FIT_MARGIN and d > GRAIN_FIT_SE * _se_of_difference(ref, s)
 
 
 def _se_of_difference(a: Mapping[str, Any], b: Mapping[str, Any]) -> float:
@@ -657,18 +697,21 @@ class _GrainScaled(_Varied):
 
 
 class _LawSwitched(_Varied):
-    """A simulator whose every run is in contact law ``law`` (``LAW_KEY``) with the grains'
-    impact modulus factor ``young_factor`` (``IMPACT_YOUNG_KEY``, multiplied into a factor the
-    request already has): the bed each run deposits, and its packing cache entry, stay the
-    scenario's."""
+    """A simulator whose every run is in contact law ``law`` (``LAW_KEY``; None: the law the
+    request has, the scenario's) with the grains' impact modulus factor ``young_factor``
+    (``IMPACT_YOUNG_KEY``, multiplied into a factor the request already has): the bed each run
+    deposits, and its packing cache entry, stay the scenario's."""
 
-    def __init__(self, sim: Simulator, law: str, young_factor: float):
+    def __init__(self, sim: Simulator, law: str | None, young_factor: float):
         super().__init__(sim)
         self.law, self.young_factor = law, float(young_factor)
 
     def scaled(self, overrides: Mapping[str, Any]) -> dict[str, Any]:
-        return {**overrides, LAW_KEY: self.law,
-                IMPACT_YOUNG_KEY: self.young_factor * float(overrides.get(IMPACT_YOUNG_KEY, 1.0))}
+        out = {**overrides, IMPACT_YOUNG_KEY:
+               self.young_factor * float(overrides.get(IMPACT_YOUNG_KEY, 1.0))}
+        if self.law is not None:
+            out[LAW_KEY] = self.law
+        return out
 
 
 def _without_hertz_floor(full_search: bool | Mapping[str, catalogue.FullSearch]

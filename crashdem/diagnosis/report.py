@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from crashdem.diagnosis.catalogue import HERTZ_FLOOR_FORM
+from crashdem.diagnosis.confirm import OWN_LAW
 from crashdem.signal import G0
 
 __all__ = ["write_report", "to_json", "to_markdown", "plot_overlays"]
@@ -448,36 +449,53 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
     """report.md's paragraph and table of the law fit (``fit.law_fit``)."""
     at, ch = lfit.get("at_model_law"), lfit.get("chosen")
     law = lfit["law"]
+    stiff = any(g["contact_law"] == OWN_LAW and g["impact_young_factor"] is not None
+                for g in lfit["laws"])
+    own_taken = ch is not None and ch["contact_law"] == OWN_LAW
     lines = ["", f"Law fit ({lfit['runs']} runs): the baseline's realisations on their own beds "
-             f"with the {law} contact law at each factor on the grains' modulus in the impact "
+             f"with the {law} contact law "
+             + ("and with the scenario's law " if stiff else "")
+             + "at each factor on the grains' modulus in the impact "
              f"(soil.impact_young_factor), each rated by the mean BIC of its realisations "
-             f"against the recording; the {law} law is taken when it beats the scenario's law "
-             f"by {lfit['margin_bic']:g} and by {lfit['se_factor']:g} standard errors of the "
-             f"difference (of those within the margin of the best BIC, the best mean score). "
+             f"against the recording; another law or modulus is taken when it beats the "
+             f"scenario's own by {lfit['margin_bic']:g} and by {lfit['se_factor']:g} standard "
+             f"errors of the difference (of those within the margin of the best BIC, the best "
+             f"mean score)"
+             + (f", the {law} law only when it also beats the scenario's law at its best "
+                f"modulus so (Delta BIC vs the scenario's law's best in brackets)" if stiff
+                else "") + ". "
              + (f"Run on: {lfit['simulator']}. " if lfit.get("simulator") else "")
-             + (f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; the "
+             + (f"Taken: the scenario's law at x{ch['impact_young_factor']:g} the modulus, a "
+                f"recalibration of the soil's stiffness; the confirmation above is made with "
+                f"every run at it. At the scenario's modulus it named "
+                if own_taken else
+                f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; the "
                 f"confirmation above is made with every run in it (the law and its modulus are "
                 f"part of the recalibration). In the scenario's law it named "
-                + (at["named"] if at and at.get("named") else "nothing") + "."
-                if ch else "The scenario's law stands."),
+                if ch else "")
+             + ((at["named"] if at and at.get("named") else "nothing") + "." if ch else
+                "The scenario's law stands at its modulus."),
              "", ("| contact law | modulus factor | mean BIC | sd | Delta BIC vs the scenario's "
                   "law (its standard error) | mean score | realisations |"),
              "|---|---|---|---|---|---|---|"]
     for g in lfit["laws"]:
         k = g["impact_young_factor"]
         own = k is None
-        name = "the scenario's" if own else g["contact_law"]
-        lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | " + _rated_cells(g, own))
+        name = "the scenario's" if g["contact_law"] == OWN_LAW else g["contact_law"]
+        vs = g.get("delta_bic_vs_own_law")
+        lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | "
+                     + _rated_cells(g, own, "" if vs is None else f" [{vs:.1f}]"))
     return lines
 
 
-def _rated_cells(g: dict[str, Any], own: bool) -> str:
+def _rated_cells(g: dict[str, Any], own: bool, note: str = "") -> str:
     """The cells of one rated variant of a realisation fit (``fit.grain_fit.sizes``,
     ``fit.law_fit.laws``) from its mean BIC on: mean BIC, sd, Delta BIC vs the model's own
-    variant with its standard error ("-" for the model's own), mean score, realisations."""
+    variant with its standard error ("-" for the model's own) and ``note``, mean score,
+    realisations."""
     sd, db, se = g.get("bic_sd"), g.get("delta_bic_vs_model"), g.get("se_vs_model")
     return (f"{g['bic_mean']:.1f} | {'-' if sd is None else f'{sd:.1f}'} | "
             + ("-" if db is None or own else
-               f"{db:.1f}" + (f" ({se:.1f})" if se is not None else ""))
+               f"{db:.1f}" + (f" ({se:.1f})" if se is not None else "") + note)
             + f" | {_fmt(g['score_mean'])} | {g['realisations']} |")
 

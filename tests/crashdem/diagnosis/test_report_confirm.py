@@ -473,7 +473,10 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
     better, the confirmation in it names nothing, and every run of that confirmation is in the
     law at 4 x. The report keeps the answer in the scenario's law, its baseline score as
     ``before``, the runs, and the law in the recalibration. Control: a floor recorded in the
-    scenario's law, which the other law fits worse: the law stands, the floor named."""
+    scenario's law, which the other law fits worse: the law stands, the floor named. The law
+    fit also rates the scenario's law at the same moduli (here: unchanged by the modulus, so
+    not taken); when the scenario's law at 4 x reads as the same layer, the law stands and its
+    4 x modulus is taken instead (a stiffness, not a law)."""
     from crashdem import scenario
     from crashdem.diagnosis.catalogue import DROP
     from crashdem.diagnosis.cli import rom_from_scenario
@@ -482,6 +485,7 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
         IMPACT_YOUNG_KEY,
         LAW_FIT_FACTORS,
         LAW_KEY,
+        OWN_LAW,
     )
     from crashdem.diagnosis.report import to_markdown
 
@@ -490,10 +494,13 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
     calls: list = []
     rom = _scenario_rom_simulator(calls)
 
+    stiffness_reads_as_layer = False
+
     def other_law_reads_as_layer(overrides):
         ov = dict(overrides)
         law, k = ov.pop(LAW_KEY, "linear"), float(ov.pop(IMPACT_YOUNG_KEY, 1.0))
-        if law == "hertz_mindlin" and not any(x.startswith("physics.soil_layering.") for x in ov):
+        if ((law == "hertz_mindlin" or stiffness_reads_as_layer and k == 4.0)
+                and not any(x.startswith("physics.soil_layering.") for x in ov)):
             ov.update(as_layer[k])
         out = rom(ov)
         calls[-1] = dict(overrides)
@@ -503,10 +510,10 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
         p = rom_from_scenario(scenario.loads(SCENARIO_TOML).with_overrides(ov))
         return acquire(p, np.random.default_rng(5))
 
-    def run(rec, law_fit):
+    def run(rec, law_fit, **kw):
         calls.clear()
         return screen_then_confirm(simulate(RomParams()), rec, other_law_reads_as_layer,
-                                   top_k=0, full_search=fs, law_fit=law_fit)
+                                   top_k=0, full_search=fs, law_fit=law_fit, **kw)
 
     null = recording(as_layer[4.0])
     claimed = run(null, LAW_FIT_FACTORS)
@@ -517,39 +524,70 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
 
     fitted = run(null, (2.0, 4.0))
     g = fitted.fit["law_fit"]
-    laws = {s["impact_young_factor"]: s for s in g["laws"]}
-    assert set(laws) == {None, 2.0, 4.0} and g["law"] == "hertz_mindlin"
-    assert laws[4.0]["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
-    assert laws[4.0]["bic_mean"] < laws[2.0]["bic_mean"] - GRAIN_FIT_MARGIN
+    laws = {(s["contact_law"], s["impact_young_factor"]): s for s in g["laws"]}
+    assert set(laws) == {(OWN_LAW, None), (OWN_LAW, 2.0), (OWN_LAW, 4.0),
+                         ("hertz_mindlin", 2.0), ("hertz_mindlin", 4.0)}
+    assert g["law"] == "hertz_mindlin"
+    hz4, hz2 = laws["hertz_mindlin", 4.0], laws["hertz_mindlin", 2.0]
+    assert hz4["delta_bic_vs_model"] > GRAIN_FIT_MARGIN
+    assert hz4["delta_bic_vs_own_law"] > GRAIN_FIT_MARGIN  # the scenario's law at no modulus
+    assert hz4["bic_mean"] < hz2["bic_mean"] - GRAIN_FIT_MARGIN
     assert g["chosen"] == {"contact_law": "hertz_mindlin", "impact_young_factor": 4.0}
     assert fitted.missing_physics is None, fitted.decision
     assert g["at_model_law"]["named"] == "soil_layering"
     assert fitted.fit["before"] == claimed.fit["before"]
     assert fitted.fit["before_at_law_fit"]["overall"] > fitted.fit["before"]["overall"]
-    # the confirmation in the scenario's law, the law fit's two runs, then every run of the
-    # confirmation in the law at 4 x
-    i = next(i for i, c in enumerate(calls) if LAW_KEY in c)
-    assert i > 0 and [c.get(IMPACT_YOUNG_KEY) for c in calls[i:i + 2]] == [2.0, 4.0]
+    # the confirmation in the scenario's law, the law fit's four runs (the scenario's law at
+    # 2 and 4 x, then the other law), then every run of the confirmation in the law at 4 x
+    i = next(i for i, c in enumerate(calls) if IMPACT_YOUNG_KEY in c)
+    assert i > 0 and [c.get(IMPACT_YOUNG_KEY) for c in calls[i:i + 4]] == [2.0, 4.0, 2.0, 4.0]
+    assert [c.get(LAW_KEY) for c in calls[i:i + 4]] == [None, None] + ["hertz_mindlin"] * 2
     assert all(c[LAW_KEY] == "hertz_mindlin" and c[IMPACT_YOUNG_KEY] == 4.0
-               for c in calls[i + 2:])
-    assert fitted.simulations["law_fit_simulations"] == g["runs"] == len(calls) - i > 2
+               for c in calls[i + 4:])
+    assert fitted.simulations["law_fit_simulations"] == g["runs"] == len(calls) - i > 4
     (recal,) = [h for h in fitted.hypotheses if h["name"] == "recalibration"]
     assert recal["contact_law"] == "hertz_mindlin" and recal["impact_young_factor"] == 4.0
     assert "Taken: hertz_mindlin at x4 the modulus" in to_markdown(fitted)
     assert "In the scenario's law it named soil_layering." in to_markdown(fitted)
 
+    # without the scenario's law at other moduli (law_fit_stiffness=()): the other law alone
+    alone = run(null, (2.0, 4.0), law_fit_stiffness=())
+    assert {s["contact_law"] for s in alone.fit["law_fit"]["laws"][1:]} == {"hertz_mindlin"}
+    assert alone.fit["law_fit"]["chosen"] == g["chosen"]
+    assert "delta_bic_vs_own_law" not in alone.fit["law_fit"]["laws"][1]
+
+    # a stiffness: the scenario's law at 4 x reads as the same layer as the other law at 4 x
+    stiffness_reads_as_layer = True
+    stiff = run(null, (2.0, 4.0))
+    g = stiff.fit["law_fit"]
+    assert g["chosen"] == {"contact_law": OWN_LAW, "impact_young_factor": 4.0}
+    assert stiff.missing_physics is None, stiff.decision
+    assert g["at_model_law"]["named"] == "soil_layering"
+    i = next(i for i, c in enumerate(calls) if IMPACT_YOUNG_KEY in c)
+    assert all(LAW_KEY not in c and c[IMPACT_YOUNG_KEY] == 4.0 for c in calls[i + 4:])
+    (recal,) = [h for h in stiff.hypotheses if h["name"] == "recalibration"]
+    assert recal["impact_young_factor"] == 4.0 and "contact_law" not in recal
+    assert "Taken: the scenario's law at x4 the modulus, a recalibration of the soil's " \
+        "stiffness" in to_markdown(stiff)
+    stiffness_reads_as_layer = False
+
     floor = run(recording(fs["boundary_proximity"].overrides(0.9)), (4.0,))
     g = floor.fit["law_fit"]
-    assert g["chosen"] is None and g["runs"] == 1 and "at_model_law" not in g
-    laws = {s["impact_young_factor"]: s["bic_mean"] for s in g["laws"]}
-    assert laws[4.0] > laws[None]
+    assert g["chosen"] is None and g["runs"] == 2 and "at_model_law" not in g
+    laws = {s["contact_law"]: s["bic_mean"] for s in g["laws"] if s["impact_young_factor"]}
+    own = g["laws"][0]["bic_mean"]
+    # the stand-in's modulus changes nothing: the run, not the baseline signals, within 0.5
+    assert laws["hertz_mindlin"] > own and abs(laws[OWN_LAW] - own) < 0.5
     assert floor.missing_physics == "boundary_proximity", floor.decision
     assert "before_at_law_fit" not in floor.fit
-    assert "The scenario's law stands." in to_markdown(floor)
+    assert "The scenario's law stands at its modulus." in to_markdown(floor)
     with pytest.raises(ValueError, match="law_fit_law='hooke': must be one of linear"):
         screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(4.0,), law_fit_law="hooke")
-    with pytest.raises(ValueError, match=r"factor 0.0 is outside \[0.01, 100\]"):
+    with pytest.raises(ValueError, match=r"law_fit=\(0.0,\): factor 0.0 is outside \[0.01, 100\]"):
         screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(0.0,))
+    with pytest.raises(ValueError, match=r"law_fit_stiffness=\(200.0,\): factor 200.0 is outs"):
+        screen_then_confirm(simulate(RomParams()), null, rom, law_fit=(4.0,),
+                            law_fit_stiffness=(200.0,))
 
 
 def test_law_fit_choice_floor_run_and_cli_factors():
@@ -589,13 +627,31 @@ def test_law_fit_choice_floor_run_and_cli_factors():
     assert law_choice([law(None, 70.5, 12.0, 0.78), law(4.0, 62.0, 12.0, 0.80)]) is None
     assert law_choice([law(4.0, 62.0, 1.0, 0.80)]) is None  # the scenario's law not rated
 
+    # with the scenario's law at 4 x too: the other law must also beat its best modulus
+    def own(k, mean, sd, score):
+        return {**law(None, mean, sd, score), "impact_young_factor": k}
+
+    seed30[2]["bic_mean"] = 57.7
+    table = [*seed30, own(4.0, 55.0, 5.0, 0.76)]  # within the margin of the best: a stiffness
+    assert law_choice(table) == {"contact_law": "scenario", "impact_young_factor": 4.0}
+    assert table[3]["delta_bic_vs_own_law"] == pytest.approx(2.9)
+    # 4 x of the scenario's law not decisive (6.5 < 2 SE); 8 x of the other law beats it
+    # by 11.9 > 2 SE (6.5), 4 x by 6.3 < 2 SE (6.6): the law at 8 x, not the better-rated 4 x
+    table = [*seed30, own(4.0, 64.0, 5.0, 0.76)]
+    assert law_choice(table) == {"contact_law": "hertz_mindlin", "impact_young_factor": 8.0}
+    assert table[2]["delta_bic_vs_own_law"] == pytest.approx(6.3)
+    # the other law beats the scenario's modulus but not its 4 x, which is not decisive itself
+    table = [law(None, 70.5, 5.7, 0.78), own(4.0, 64.0, 5.0, 0.79), law(4.0, 60.0, 5.4, 0.80)]
+    assert law_choice(table) is None
+    assert table[2]["delta_bic_vs_model"] == pytest.approx(10.5)
+
     lin = scenario.loads(SCENARIO_TOML)
-    assert _law_fit_factors(lin, None) == ((), "hertz_mindlin")
-    assert _law_fit_factors(lin, "2,4,8") == ((2.0, 4.0, 8.0), "hertz_mindlin")
-    assert _law_fit_factors(lin, "off") == ((), "hertz_mindlin")
+    assert _law_fit_factors(lin, None) == ((), "hertz_mindlin", ())
+    assert _law_fit_factors(lin, "2,4,8") == ((2.0, 4.0, 8.0), "hertz_mindlin", (2.0, 4.0, 8.0))
+    assert _law_fit_factors(lin, "off") == ((), "hertz_mindlin", ())
     hz = lin.with_overrides({"soil.contact_law": "hertz_mindlin",
                              "soil.impact_young_factor": 4.0})
-    assert _law_fit_factors(hz, "0.25,0.5") == ((1.0, 2.0), "linear")
+    assert _law_fit_factors(hz, "0.25,0.5,1") == ((1.0, 2.0, 4.0), "linear", (1.0, 2.0))
     with pytest.raises(ValueError, match=r"--law-fit='2,40': factor 40 is outside \[0.0025, 25\]"):
         _law_fit_factors(hz, "2,40")
     with pytest.raises(ValueError, match="--law-fit='x': must be comma-separated"):
