@@ -644,6 +644,10 @@ def test_law_fit_choice_floor_run_and_cli_factors():
     table = [law(None, 70.5, 5.7, 0.78), own(4.0, 64.0, 5.0, 0.79), law(4.0, 60.0, 5.4, 0.80)]
     assert law_choice(table) is None
     assert table[2]["delta_bic_vs_model"] == pytest.approx(10.5)
+    # ... but when the 4 x is decisive (8.5 > 2 SE, 6.8), it is taken, though 7 in BIC from
+    # the other law's best: that law does not beat it beyond 2 SE (8.4)
+    table = [law(None, 70.5, 5.7, 0.78), own(4.0, 62.0, 5.0, 0.79), law(4.0, 55.0, 8.0, 0.80)]
+    assert law_choice(table) == {"contact_law": "scenario", "impact_young_factor": 4.0}
 
     lin = scenario.loads(SCENARIO_TOML)
     assert _law_fit_factors(lin, None) == ((), "hertz_mindlin", ())
