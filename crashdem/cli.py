@@ -259,6 +259,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "in it (the other law only when it also beats the scenario's law at "
                         "its best modulus; default off; e.g. 2,4,8 for Hertz-Mindlin against a "
                         "linear law calibrated on the same test)")
+    d.add_argument("--law-fit-stiffness", default="on", choices=("on", "off"),
+                   help="with --law-fit, also rate the scenario's own law at the same factors "
+                        "on the modulus (on, default): the other law is then taken only when "
+                        "it also beats the scenario's law at its best modulus, otherwise a "
+                        "decisive modulus of the scenario's law is taken as a stiffness "
+                        "recalibration; off: the other law alone, against the scenario's law "
+                        "at its modulus")
     d.add_argument("--grain-fit-tier", default=None, choices=("search", "tier", "full"),
                    help="where the grain fit runs when the search runs on the coarse tier: "
                         "search (default) on that tier; tier = on the scenario's own grains in "

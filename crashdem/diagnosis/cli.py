@@ -403,6 +403,8 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         grain = _grain_scales(getattr(args, "grain_check", None))
         gfit = _grain_fit_scales(getattr(args, "grain_fit", None))
         lfit, lfit_law, lfit_own = _law_fit_factors(scen, getattr(args, "law_fit", None))
+        if getattr(args, "law_fit_stiffness", "on") == "off":
+            lfit_own = ()
         level_beds = _level_beds(getattr(args, "level_beds", None))
         one_bed = _one_bed(scen, search_sim, args) if searched else None
         if one_bed is not None:

@@ -128,7 +128,9 @@ GRAIN_FIT_SE = 2.0
 #: that the recording's soil does not fix, and most DEM codes use Hertz-Mindlin where this one
 #: (after the thesis) uses linear springs; measured on Yade's Hertz-Mindlin recordings with the
 #: recording's law in the model: no wrong name and no null claim on 30, against one of each with
-#: the linear law (docs/diagnosis.md "The law fit"). Off by default (``()``)
+#: the linear law (docs/diagnosis.md "The law fit"). The scenario's own law is rated at the same
+#: moduli too (``law_fit_stiffness``), and the other law is taken only when it also beats that
+#: law's best modulus (session 53). Off by default (``()``)
 LAW_FIT_FACTORS: tuple[float, ...] = ()
 #: the scenario keys the law fit sets on every run of the other law
 LAW_KEY = "soil.contact_law"

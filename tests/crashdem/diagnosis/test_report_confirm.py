@@ -660,6 +660,15 @@ def test_law_fit_choice_floor_run_and_cli_factors():
         _law_fit_factors(hz, "2,40")
     with pytest.raises(ValueError, match="--law-fit='x': must be comma-separated"):
         _law_fit_factors(lin, "x")
+    # --law-fit-stiffness: on by default, off leaves the scenario's law at its own modulus
+    from crashdem.cli import build_parser
+
+    base = ["diagnose", "--scenario", "s.toml", "--recording", "r.csv", "--out", "o"]
+    assert build_parser().parse_args(base).law_fit_stiffness == "on"
+    assert build_parser().parse_args([*base, "--law-fit-stiffness", "off"]).law_fit_stiffness \
+        == "off"
+    with pytest.raises(SystemExit):
+        build_parser().parse_args([*base, "--law-fit-stiffness", "maybe"])
 
 
 def test_grain_fit_on_its_own_tier_is_anchored_through_that_tier():
