@@ -536,8 +536,11 @@ def law_choice(laws: list[dict[str, Any]]) -> dict[str, Any] | None:
     that beat the scenario's own decisively and lie within the margin of its best, the best
     rated is taken (its stiffness is recalibrated), or none: a better fit in the other law that
     the scenario's law at another modulus matches within the packings' scatter does not tell a
-    law from a stiffness, and the stiffness is the parameter the model has. Measured on a Yade Hertz-Mindlin null (13.7 m, seed 30): 4 and 8 x the modulus
-    within 5.6 in BIC, rated 0.755 and 0.701 (the truth: 4 x). Each entry gets its
+    law from a stiffness, and the stiffness is the parameter the model has. Measured on a Yade
+    Hertz-Mindlin null (13.7 m, seed 30), the other law alone: 4 and 8 x the modulus within 5.6
+    in BIC, rated 0.755 and 0.701 (the truth: 4 x); on the 24 rated Yade recordings at 13.7 m
+    the other law was taken on 4 of 12 Hertz-Mindlin and 1 of 12 linear recordings, 12 and 9
+    without the scenario's law at the same moduli (docs/diagnosis.md). Each entry gets its
     ``delta_bic_vs_model`` and ``se_vs_model``. None: the scenario's law stands at its own
     modulus (also when it was not rated)."""
     own = next((s for s in laws if s["impact_young_factor"] is None), None)
