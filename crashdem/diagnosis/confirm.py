@@ -448,8 +448,27 @@ def _law_fit(p: _Pass, factors: Sequence[float], law: str,
     variants += [({"contact_law": law, "impact_young_factor": float(k)},
                   lambda sim, k=float(k): _LawSwitched(sim, law, k)) for k in factors]
     laws, runs, where = _realisation_fit(p, variants, replicates, None)
+    chosen = law_choice(laws)
     return {"law": law, "laws": laws, "margin_bic": GRAIN_FIT_MARGIN, "se_factor": GRAIN_FIT_SE,
-            "chosen": law_choice(laws), "runs": runs, "simulator": where}
+            "chosen": chosen, "law_undecided": _law_undecided(laws, chosen), "runs": runs,
+            "simulator": where}
+
+
+def _law_undecided(laws: list[dict[str, Any]], chosen: dict[str, Any] | None
+                   ) -> dict[str, Any] | None:
+    """When the law fit kept the scenario's law (``chosen`` None or ``OWN_LAW``) although the
+    other law at some modulus fits better than the scenario's law at its best modulus (after
+    ``law_choice``: ``delta_bic_vs_own_law`` > 0), that best entry of the other law (its
+    modulus, Delta BIC and standard error): the recording does not tell the two laws apart.
+    None otherwise."""
+    if chosen is not None and chosen["contact_law"] != OWN_LAW:
+        return None
+    better = [s for s in laws if (s.get("delta_bic_vs_own_law") or 0.0) > 0.0]
+    if not better:
+        return None
+    b = max(better, key=lambda s: s["delta_bic_vs_own_law"])
+    return {"contact_law": b["contact_law"], "impact_young_factor": b["impact_young_factor"],
+            "delta_bic_vs_own_law": b["delta_bic_vs_own_law"], "se_vs_own_law": b["se_vs_own_law"]}
 
 
 def _realisation_fit(p: _Pass, variants: Sequence[tuple[dict[str, Any],

@@ -474,7 +474,8 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
                 f"part of the recalibration). In the scenario's law it named "
                 if ch else "")
              + ((at["named"] if at and at.get("named") else "nothing") + "." if ch else
-                "The scenario's law stands at its modulus."),
+                "The scenario's law stands at its modulus.")
+             + _undecided_sentence(lfit.get("law_undecided")),
              "", ("| contact law | modulus factor | mean BIC | sd | Delta BIC vs the scenario's "
                   "law (its standard error) | mean score | realisations |"),
              "|---|---|---|---|---|---|---|"]
@@ -486,6 +487,17 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
         lines.append(f"| {name} | {'-' if own else f'x{k:g}'} | "
                      + _rated_cells(g, own, "" if vs is None else f" [{vs:.1f}]"))
     return lines
+
+
+def _undecided_sentence(u: dict[str, Any] | None) -> str:
+    """report.md's sentence on a law the law fit did not take though it fit better
+    (``fit.law_fit.law_undecided``); "" when there is none."""
+    if not u:
+        return ""
+    return (f" The {u['contact_law']} law at x{u['impact_young_factor']:g} the modulus fits the "
+            f"recording better than the scenario's law at its best modulus by "
+            f"{u['delta_bic_vs_own_law']:.1f} in BIC ({u['se_vs_own_law']:.1f} standard error), "
+            f"not decisively: the recording does not tell the two contact laws apart.")
 
 
 def _rated_cells(g: dict[str, Any], own: bool, note: str = "") -> str:

@@ -569,6 +569,10 @@ def test_law_fit_confirms_in_the_contact_law_that_fits_the_recording(tmp_path):
     assert recal["impact_young_factor"] == 4.0 and "contact_law" not in recal
     assert "Taken: the scenario's law at x4 the modulus, a recalibration of the soil's " \
         "stiffness" in to_markdown(stiff)
+    # the other law at 4 x is the same stand-in run as the scenario's at 4 x: no better, so
+    # nothing undecided to report; nor where the other law was taken
+    assert g["law_undecided"] is None and fitted.fit["law_fit"]["law_undecided"] is None
+    assert "does not tell the two contact laws apart" not in to_markdown(stiff)
     stiffness_reads_as_layer = False
 
     floor = run(recording(fs["boundary_proximity"].overrides(0.9)), (4.0,))
@@ -601,7 +605,8 @@ def test_law_fit_choice_floor_run_and_cli_factors():
     from crashdem import scenario
     from crashdem.diagnosis.catalogue import DROP
     from crashdem.diagnosis.cli import _law_fit_factors
-    from crashdem.diagnosis.confirm import _without_hertz_floor, law_choice
+    from crashdem.diagnosis.confirm import _law_undecided, _without_hertz_floor, law_choice
+    from crashdem.diagnosis.report import _undecided_sentence
 
     lay = replace(DROP.full_search["soil_layering"], hertz_floor=4.0)
     out = _without_hertz_floor({"soil_layering": lay, "x": DROP.full_search["boundary_proximity"]})
@@ -648,6 +653,18 @@ def test_law_fit_choice_floor_run_and_cli_factors():
     # the other law's best: that law does not beat it beyond 2 SE (8.4)
     table = [law(None, 70.5, 5.7, 0.78), own(4.0, 62.0, 5.0, 0.79), law(4.0, 55.0, 8.0, 0.80)]
     assert law_choice(table) == {"contact_law": "scenario", "impact_young_factor": 4.0}
+    # ... and reported: the other law fits better, not decisively (Yade Hertz-Mindlin
+    # layering 11 at 13.7 m: the linear x4 taken, Hertz-Mindlin x8 7.4 better at 4.7 SE)
+    lay11 = [law(None, 82.5, 2.4, 0.632), own(4.0, 66.6, 3.8, 0.736),
+             own(8.0, 66.1, 9.2, 0.688), law(8.0, 58.7, 5.1, 0.762)]
+    chosen = law_choice(lay11)
+    assert chosen == {"contact_law": "scenario", "impact_young_factor": 4.0}
+    u = _law_undecided(lay11, chosen)
+    assert u["impact_young_factor"] == 8.0 and u["delta_bic_vs_own_law"] == pytest.approx(7.4)
+    assert "fits the recording better than the scenario's law at its best modulus by 7.4 in " \
+        "BIC (4.7 standard error), not decisively" in _undecided_sentence(u)
+    assert _law_undecided(seed30, law_choice(seed30)) is None  # the other law taken
+    assert _law_undecided(table[:2], None) is None and _undecided_sentence(None) == ""
 
     lin = scenario.loads(SCENARIO_TOML)
     assert _law_fit_factors(lin, None) == ((), "hertz_mindlin", ())
