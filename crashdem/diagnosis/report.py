@@ -451,7 +451,17 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
     law = lfit["law"]
     stiff = any(g["contact_law"] == OWN_LAW and g["impact_young_factor"] is not None
                 for g in lfit["laws"])
-    own_taken = ch is not None and ch["contact_law"] == OWN_LAW
+    named = at["named"] if at and at.get("named") else "nothing"
+    if ch is None:
+        taken = "The scenario's law stands at its modulus."
+    elif ch["contact_law"] == OWN_LAW:
+        taken = (f"Taken: the scenario's law at x{ch['impact_young_factor']:g} the modulus, a "
+                 f"recalibration of the soil's stiffness; the confirmation above is made with "
+                 f"every run at it. At the scenario's modulus it named {named}.")
+    else:
+        taken = (f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; "
+                 f"the confirmation above is made with every run in it (the law and its modulus "
+                 f"are part of the recalibration). In the scenario's law it named {named}.")
     lines = ["", f"Law fit ({lfit['runs']} runs): the baseline's realisations on their own beds "
              f"with the {law} contact law "
              + ("and with the scenario's law " if stiff else "")
@@ -465,17 +475,7 @@ def _law_fit_lines(lfit: dict[str, Any]) -> list[str]:
                 f"modulus so (Delta BIC vs the scenario's law's best in brackets)" if stiff
                 else "") + ". "
              + (f"Run on: {lfit['simulator']}. " if lfit.get("simulator") else "")
-             + (f"Taken: the scenario's law at x{ch['impact_young_factor']:g} the modulus, a "
-                f"recalibration of the soil's stiffness; the confirmation above is made with "
-                f"every run at it. At the scenario's modulus it named "
-                if own_taken else
-                f"Taken: {ch['contact_law']} at x{ch['impact_young_factor']:g} the modulus; the "
-                f"confirmation above is made with every run in it (the law and its modulus are "
-                f"part of the recalibration). In the scenario's law it named "
-                if ch else "")
-             + ((at["named"] if at and at.get("named") else "nothing") + "." if ch else
-                "The scenario's law stands at its modulus.")
-             + _undecided_sentence(lfit.get("law_undecided")),
+             + taken + _undecided_sentence(lfit.get("law_undecided")),
              "", ("| contact law | modulus factor | mean BIC | sd | Delta BIC vs the scenario's "
                   "law (its standard error) | mean score | realisations |"),
              "|---|---|---|---|---|---|---|"]
