@@ -195,11 +195,16 @@ def impact_materials(scen: Scenario, packing) -> list:
                     if scen["physics.particle_rotation.enabled"] else scen["soil.rolling_coefficient"])
             kw["rolling"] = soil.Rolling(coefficient=mu_r)
         e = scen["soil.restitution"]
+        e_s = scen["soil.shear_restitution"]
         if scen["physics.contact_damping.enabled"]:
             e = scen["physics.contact_damping.restitution"]
             kw["dashpot_tension"] = bool(scen["physics.contact_damping.tension"])
+            if scen["physics.contact_damping.shear"]:
+                e_s = e
         if e is not None:
             kw["restitution"] = e
+        if e_s is not None:
+            kw["shear_restitution"] = e_s
         kw.update(_law(scen))
         if scale != 1.0:
             kw["young"] = m.young * scale

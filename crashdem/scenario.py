@@ -173,6 +173,7 @@ SCHEMA: dict[str, Any] = {
         "deposition_friction_deg": F(None, "deg", 0, 90, hi_open=True, doc="friction during deposition (null = material value)", nullable=True),
         "material": dict(MATERIAL),
         "restitution": F(None, "1", 0, 1, lo_open=True, doc="viscous normal damping from a restitution coefficient (null = off, thesis)", nullable=True),
+        "shear_restitution": F(None, "1", 0, 1, lo_open=True, doc="viscous shear damping: a dashpot beside the shear spring of this restitution (damping ratio of the shear spring as the normal one's), acting while a contact sticks, as Yade's MindlinPhys (es) and ViscElPhys (et) and EDEM's and LIGGGHTS' Hertz-Mindlin; null = off (thesis; soil.Material.shear_restitution)", nullable=True),
         "contact_law": C("linear", "linear", "hertz_mindlin", doc="contact law of the impact phase: linear Cundall-Strack springs kn = E r, ks = stiffness_ratio kn (thesis, Yade's FrictPhys), or Hertz-Mindlin (Fn = 4/3 E* sqrt(R*) delta^1.5, ks = 8 G* sqrt(R* delta), Yade's MindlinPhys) for the grains, the walls and the impactor; the bed is deposited with the linear law either way (soil.Material.contact_law)"),
         "poisson": F(0.25, "1", 0, 0.5, hi_open=True, doc="Poisson's ratio of the grains, walls and impactor with contact_law = hertz_mindlin (unused by the linear law)"),
         "impact_young_factor": F(1.0, "1", 0.01, 100.0, doc="factor on the grains' Young's modulus (both layers) and on a wall of the soil's modulus (container.wall_young null) in the impact phase; the bed is deposited at soil.material.young, so its packing (and packing cache entry) is the factor-1 bed's. A contact law calibrated on the same bed at another modulus (Hertz-Mindlin at about 4 x the linear law's on the campaign's gravel) without depositing it again"),
@@ -241,6 +242,7 @@ SCHEMA: dict[str, Any] = {
             "enabled": B(False, doc="viscous normal contact damping"),
             "restitution": F(0.5, "1", 0, 1, lo_open=True, doc="coefficient of restitution"),
             "tension": B(False, doc="the dashpot may pull while a contact opens (Yade's CundallStrackVisco and codes like it: a binary rebound at exactly the restitution); false: the contact force never pulls (the rebound is above the restitution)"),
+            "shear": B(False, doc="the contacts' shear is damped too, at the same restitution (a shear dashpot acting while a contact sticks: Yade's MindlinPhys with es = en, EDEM's and LIGGGHTS' Hertz-Mindlin); false: the normal dashpot only (Yade's CundallStrackVisco)"),
         },
         "sensor_dynamics": {
             "enabled": B(False, doc="accelerometer-mount resonance or a different filter class"),

@@ -84,15 +84,18 @@ M_DENSITY = 14
 M_TENSION = 15  # > 0: the normal dashpot may pull while the contact opens
 M_LAW = 16  # contact_laws.LAW_LINEAR / LAW_HERTZ_MINDLIN
 M_POISSON = 17  # Poisson's ratio (Hertz-Mindlin)
-M_NCOL = 18
+M_SHEAR_RESTITUTION = 18  # shear dashpot; 1.0 = none
+M_NCOL = 19
 
 # pair state flags
 BOND_NONE = 0
 BOND_ACTIVE = 1
 
 # boundary contact history columns: Fs[3], n[3], fn, kn, ks, M_roll[3], kr, normal elastic
-# energy (kn: the tangent normal stiffness, for the time step)
-B_NCOL = 14
+# energy (kn: the tangent normal stiffness, for the time step), the shear dashpot's force[3]
+# (the step's, not history: Fs is the elastic spring)
+B_NCOL = 17
+B_FV = 14
 
 # boundary element types
 E_PLANE = 0
@@ -520,6 +523,9 @@ H_UNP = 9  # plastic normal displacement [m]
 H_MB = 10  # 10..12 bending / rolling moment on j [N m]
 H_MT = 13  # 13..15 twisting moment on j [N m]
 H_NCOL_FULL = 16
+# shear dashpot (a material with ``shear_restitution``): three more columns after the basic or
+# full layout, the viscous shear force on j of the step [N] (``fv`` = their first index; the
+# shear spring in H_FS stays elastic)
 # Hertz-Mindlin pairs: one more column, the last (``hf.shape[1] - 1``): the overlap of the last
 # step [m], the stiffness the shear spring was made with (basic layout 8, full 17 columns)
 # per-pair int history columns
@@ -574,14 +580,35 @@ def _shear_trial(vrx, vry, vrz, nx, ny, nz, fx, fy, fz, n0x, n0y, n0z, twist, ks
     return -vn, ox, oy, oz, dux, duy, duz, ox - ks * dux, oy - ks * duy, oz - ks * duz
 
 
+@numba.njit(cache=True, inline="always")
+def _shear_dashpot(e_s, m_eff, ks, hertz, dux, duy, duz, dt):
+    """Viscous shear force of a sticking contact whose shear restitution is ``e_s`` < 1 and the
+    energy it dissipates over the step: ``f_v = -c_s du / dt`` with c_s the critical damping of
+    the shear spring ``ks`` (tangent, Hertz-Mindlin: Tsuji's form, as the normal dashpot's)
+    scaled by ``damping_ratio(e_s)``, and ``c_s |du|^2 / dt`` [J]; returns ``(fvx, fvy, fvz,
+    dissipated)``."""
+    if dt <= 0.0:
+        # the force evaluation before the first step (no displacement, no rate yet)
+        return 0.0, 0.0, 0.0, 0.0
+    zeta = damping_ratio(e_s)
+    if hertz:
+        cs = hertz_damping_coefficient(zeta, m_eff, ks)
+    else:
+        cs = damping_coefficient(zeta, m_eff, ks)
+    c = cs / dt
+    return -c * dux, -c * duy, -c * duz, c * (dux * dux + duy * duy + duz * duz)
+
+
 @pjit
 def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, dt, has_rot,
-                has_coh, has_roll, has_visc, e_fric, e_visc, e_bond):
+                has_coh, has_roll, has_visc, e_fric, e_visc, e_bond, fv):
     """Contact forces of the half neighbour list, written per pair.
 
     For each pair k = (i, j): ``hf[k]`` holds the shear spring, normal and normal force (the
     force on j is fn n + Fs; on i its opposite). With rotations, ``tq[k, 0:3]`` / ``tq[k, 3:6]``
-    receive the torques on i / j. Dissipation is accumulated on the row owner i.
+    receive the torques on i / j. Dissipation is accumulated on the row owner i. ``fv`` >= 0:
+    the first of the three columns of ``hf`` that receive the viscous shear force of a shear
+    dashpot (``Material.shear_restitution``; -1: no material has one).
 
     Notes
     -----
@@ -682,6 +709,9 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     vrx, vry, vrz, nx, ny, nz, hf[k, H_FS], hf[k, H_FS + 1], hf[k, H_FS + 2],
                     n0x, n0y, n0z, twist, ks, dt)
                 fsx, fsy, fsz = _soften(fsx, fsy, fsz, ox, oy, oz, ks, ks_old)
+                fvx = 0.0
+                fvy = 0.0
+                fvz = 0.0
                 if bonded:
                     an = hf[k, H_AN]
                     at = hf[k, H_AT]
@@ -742,16 +772,31 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
                         if cn > 0.0:
                             visc_acc += normal_dissipation(fn_old, fn, delta, delta_dot * dt, kn)
-                    fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
+                    fsx, fsy, fsz, _d, slid = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
                     if hertz:
                         fric_acc += varying_spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux,
                                                                duy, duz, ks_old, ks)
                     else:
                         fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,
                                                        ks)
+                    if fv >= 0 and not slid:
+                        e_s = min(mat[mi, M_SHEAR_RESTITUTION], mat[mj, M_SHEAR_RESTITUTION])
+                        if e_s < 1.0:
+                            fvx, fvy, fvz, wv = _shear_dashpot(
+                                e_s, mass[i] * mass[j] / (mass[i] + mass[j]), ks, hertz, dux,
+                                duy, duz, dt)
+                            visc_acc += wv
                 hf[k, H_FS] = fsx
                 hf[k, H_FS + 1] = fsy
                 hf[k, H_FS + 2] = fsz
+                if fv >= 0:
+                    # the spring keeps its elastic force; the step's force adds the dashpot's
+                    hf[k, fv] = fvx
+                    hf[k, fv + 1] = fvy
+                    hf[k, fv + 2] = fvz
+                    fsx += fvx
+                    fsy += fvy
+                    fsz += fvz
                 hf[k, H_N] = nx
                 hf[k, H_N + 1] = ny
                 hf[k, H_N + 2] = nz
@@ -861,8 +906,9 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
 
 
 @pjit
-def gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot):
-    """Per-particle sum of gravity and pair forces (and torques) in a fixed order."""
+def gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot, fv):
+    """Per-particle sum of gravity and pair forces (and torques) in a fixed order; ``fv`` >= 0:
+    the columns of ``hf`` holding the pairs' viscous shear forces (``pair_forces``)."""
     n = mass.shape[0]
     g0 = gravity[0]
     g1 = gravity[1]
@@ -879,6 +925,10 @@ def gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot
             fx -= fn * hf[k, H_N] + hf[k, H_FS]
             fy -= fn * hf[k, H_N + 1] + hf[k, H_FS + 1]
             fz -= fn * hf[k, H_N + 2] + hf[k, H_FS + 2]
+            if fv >= 0:
+                fx -= hf[k, fv]
+                fy -= hf[k, fv + 1]
+                fz -= hf[k, fv + 2]
             if has_rot:
                 tx += tq[k, 0]
                 ty += tq[k, 1]
@@ -889,6 +939,10 @@ def gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot
             fx += fn * hf[k, H_N] + hf[k, H_FS]
             fy += fn * hf[k, H_N + 1] + hf[k, H_FS + 1]
             fz += fn * hf[k, H_N + 2] + hf[k, H_FS + 2]
+            if fv >= 0:
+                fx += hf[k, fv]
+                fy += hf[k, fv + 1]
+                fz += hf[k, fv + 2]
             if has_rot:
                 tx += tq[k, 3]
                 ty += tq[k, 4]
@@ -1134,7 +1188,15 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             fn, f_visc = linear_normal_force(kno * sd, delta, cn, delta_dot, pulls)
         else:
             fn, f_visc = linear_normal_force(kn, delta, cn, delta_dot, pulls)
-        fsx, fsy, fsz, _d, _s = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
+        fsx, fsy, fsz, _d, slid = coulomb_cap(fsx, fsy, fsz, fn * tan_phi, ks)
+        fvx = 0.0
+        fvy = 0.0
+        fvz = 0.0
+        if has_visc and not slid:
+            e_s = min(mat[mb, M_SHEAR_RESTITUTION], mat[mi, M_SHEAR_RESTITUTION])
+            if e_s < 1.0:
+                fvx, fvy, fvz, wv = _shear_dashpot(e_s, mass[i], ks, hertz, dux, duy, duz, dt)
+                b_diss[b, 1] += wv
         if hertz:
             b_diss[b, 0] += varying_spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,
                                                        ks_old, ks)
@@ -1154,6 +1216,9 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
         new_hist[c, 6] = fn
         new_hist[c, 7] = kn
         new_hist[c, 8] = ks
+        new_hist[c, B_FV] = fvx
+        new_hist[c, B_FV + 1] = fvy
+        new_hist[c, B_FV + 2] = fvz
         # rolling resistance on the wall (Ai et al. 2011 type C), moment acting on the particle
         mrx = 0.0
         mry = 0.0
@@ -1197,9 +1262,9 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
             new_hist[c, 13] = 0.4 * kno * delta * delta * sd
         else:
             new_hist[c, 13] = 0.5 * kn * delta * delta
-        fx = fn * nx + fsx
-        fy = fn * ny + fsy
-        fz = fn * nz + fsz
+        fx = fn * nx + fsx + fvx
+        fy = fn * ny + fsy + fvy
+        fz = fn * nz + fsz + fvz
         f[i, 0] += fx
         f[i, 1] += fy
         f[i, 2] += fz

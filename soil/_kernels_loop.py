@@ -20,7 +20,7 @@ import numpy as np
 from soil import _kernels as K
 
 #: digest of the jitted sources compiled in (see the module docstring)
-NUMBA_CACHE_DEPENDS = "5483f760b66bbf49"
+NUMBA_CACHE_DEPENDS = "214ec451d08c8c1a"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel
@@ -235,7 +235,7 @@ def run_steps(nsteps, dt, x, v, w, f, t, radius, mass, inv_mass, inv_inertia, ma
               cell_start, cell_list, buf, b_start, m, n_analytic, etype, ebody, ep_body, en_body,
               er, ea0, ea1, ep, en, key_mult, b_mat, b_moving, b_pos, b_rot, b_vel, b_omg, b_refb,
               b_ref, b_force, b_torque, b_power, b_diss, b_impulse, b_ang_impulse, b_work, bkey,
-              bhist, c_p, c_e, c_n, c_d, c_pt, has_rot, has_coh, has_roll, has_visc):
+              bhist, c_p, c_e, c_n, c_d, c_pt, has_rot, has_coh, has_roll, has_visc, fv):
     """``nsteps`` DEM steps (same sequence as ``Simulation._steps``); returns the buffers that a
     rebuild may replace (grown), the number of pairs, the boundary contact arrays, plus
     (#builds, #bonds lost to the skin)."""
@@ -271,8 +271,8 @@ def run_steps(nsteps, dt, x, v, w, f, t, radius, mass, inv_mass, inv_inertia, ma
             x_ref[:] = x
             n_builds += 1
         _pair(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, dt, has_rot,
-              has_coh, has_roll, has_visc, e_fric, e_visc, e_bond)
-        _gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot)
+              has_coh, has_roll, has_visc, e_fric, e_visc, e_bond, fv)
+        _gather(mass, gravity, row_start, t_start, t_pair, nbr, hf, tq, f, t, has_rot, fv)
         if nb > 0:
             bkey, bhist, c_p, c_e, c_n, c_d, c_pt = boundary_step(
                 x, v, w, radius, mass, mat_id, mat, n_analytic, etype, ep, en, er, ea0, ea1,

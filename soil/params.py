@@ -127,6 +127,16 @@ class Material:
         ks/kn (Yade ``FrictMat.poisson``) [-], in [0, 1].
     restitution : float or None
         Coefficient of restitution e in (0, 1] for viscous normal damping; None = no damping.
+    shear_restitution : float or None
+        Restitution e_s in (0, 1] of a viscous *shear* dashpot in parallel with the shear
+        spring; None = none (the default, and the thesis's). Its damping ratio is
+        ``damping_ratio(e_s)`` of the shear spring: c_s = 2 zeta_s sqrt(m* k_s) with the linear
+        law, 2 sqrt(5/6) zeta_s sqrt(m* k_s,t) (Tsuji's form, as the normal dashpot's) with the
+        Hertz-Mindlin law, where k_s,t is the Mindlin tangent shear stiffness. It acts while
+        the contact sticks and is switched off while it slides (Yade
+        ``Law2_ScGeom_ViscElPhys_Basic`` and ``Law2_ScGeom_MindlinPhys_Mindlin`` with
+        ``betas`` / ``es``; EDEM's and LIGGGHTS' Hertz-Mindlin damp the shear at the normal
+        ratio). Not on cohesive bonds. A pair takes the smaller of its two materials' values.
     dashpot_tension : bool
         The normal dashpot may pull while a contact opens (Yade
         ``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco``, and codes like it); default False: the
@@ -166,6 +176,7 @@ class Material:
     name: str = "material"
     contact_law: str = "linear"  # "linear" | "hertz_mindlin"
     poisson: float = 0.25  # [-], in [0, 0.5); Hertz-Mindlin only
+    shear_restitution: float | None = None  # [-], in (0, 1] or None
 
     def __post_init__(self) -> None:
         c = "Material"
@@ -181,6 +192,11 @@ class Material:
             e = _finite(c, "restitution", self.restitution)
             if not 0.0 < e <= 1.0:
                 _fail(c, "restitution", self.restitution, "must be in (0, 1] or None [-]")
+        if self.shear_restitution is not None:
+            es = _finite(c, "shear_restitution", self.shear_restitution)
+            if not 0.0 < es <= 1.0:
+                _fail(c, "shear_restitution", self.shear_restitution,
+                      "must be in (0, 1] or None [-]")
         if not isinstance(self.dashpot_tension, bool):
             _fail(c, "dashpot_tension", self.dashpot_tension, "must be a bool")
         if self.cohesion is not None and not isinstance(self.cohesion, Cohesion):

@@ -45,6 +45,8 @@ def _material_table(materials: Sequence[Material]) -> np.ndarray:
         tab[m, K.M_TANPHI] = math.tan(mat.friction_angle)
         tab[m, K.M_RESTITUTION] = 1.0 if mat.restitution is None else mat.restitution
         tab[m, K.M_TENSION] = 1.0 if mat.dashpot_tension else 0.0
+        tab[m, K.M_SHEAR_RESTITUTION] = (1.0 if mat.shear_restitution is None
+                                         else mat.shear_restitution)
         tab[m, K.M_DENSITY] = mat.density
         tab[m, K.M_LAW] = CONTACT_LAWS.index(mat.contact_law)
         tab[m, K.M_POISSON] = mat.poisson
@@ -212,12 +214,17 @@ class Simulation:
         self._has_rot = bool(np.any(~p.rotation_blocked))
         self._has_coh = any(m.cohesion is not None for m in materials)
         self._has_roll = self._has_rot and any(m.rolling is not None for m in materials)
-        self._has_visc = any(m.restitution is not None and m.restitution < 1.0 for m in materials)
+        self._has_svisc = any(m.shear_restitution is not None and m.shear_restitution < 1.0
+                              for m in materials)
+        self._has_visc = self._has_svisc or any(
+            m.restitution is not None and m.restitution < 1.0 for m in materials)
         self._has_mom = self._has_rot and (self._has_coh or self._has_roll)
         self._has_hertz = any(m.contact_law == "hertz_mindlin" for m in materials)
         # Hertz-Mindlin: one more column, the last step's overlap (the kernels' last column)
-        self._ncol = ((K.H_NCOL_FULL if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC)
-                      + int(self._has_hertz))
+        base = K.H_NCOL_FULL if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC
+        # a shear dashpot: three columns of the pairs' viscous shear forces after the layout
+        self._fv = base if self._has_svisc else -1
+        self._ncol = base + 3 * int(self._has_svisc) + int(self._has_hertz)
         self._nicol = 1 if self._has_coh else 0
         # boundary elements (analytic first, then mesh triangles)
         etype, ebody, ep, en, er, ea0, ea1 = [], [], [], [], [], [], []
@@ -431,10 +438,10 @@ class Simulation:
         self._K.pair_forces(p.x, p.v, p.w, p.radius, p.mass, p.material, self._mat, self._row_start,
                       self._nbr, self._hf, self._hi, self._tq, self.dt if hasattr(self, "dt")
                       else 0.0, self._has_rot, self._has_coh, self._has_roll, self._has_visc,
-                      self._e_fric, self._e_visc, self._e_bond)
+                      self._e_fric, self._e_visc, self._e_bond, self._fv)
         self._K.gather(p.mass, self.gravity, self._row_start, self._t_start, self._t_pair,
                        self._nbr,
-                 self._hf, self._tq, p.f, p.t, self._has_rot)
+                 self._hf, self._tq, p.f, p.t, self._has_rot, self._fv)
         if self.boundaries:
             self._boundary_forces()
 
@@ -559,7 +566,8 @@ class Simulation:
             self._key_mult, self._b_mat, moving, self._b_pos, self._b_rot, self._b_vel,
             self._b_omg, self._b_refb, self._b_ref, b_force, b_torque, b_power, self._b_diss,
             b_imp, b_aimp, b_work, self._bkey, self._bhist, self._c_p, self._c_e, self._c_n,
-            self._c_d, self._c_pt, self._has_rot, self._has_coh, self._has_roll, self._has_visc)
+            self._c_d, self._c_pt, self._has_rot, self._has_coh, self._has_roll, self._has_visc,
+            self._fv)
         (self._nbr_buf, self._hf_buf, self._hi_buf, self._tq_buf, self._tp_buf, self._s_j,
          self._s_f, self._s_i, self._cell_start, self._nbuf, m, self._bkey, self._bhist,
          self._c_p, self._c_e, self._c_n, self._c_d, self._c_pt, nbuild, lost) = out
@@ -751,7 +759,7 @@ class Simulation:
             ``i`` particle, ``j`` second particle (-1 for a boundary), ``body`` (-1 for particle
             pairs), ``element`` (boundary element id, -1 for pairs), ``normal`` (from i/the wall
             towards j/the particle), ``fn`` normal force [N] (compression > 0), ``fs`` shear force
-            on j/the particle [N], ``overlap`` [m], ``point`` [m], ``bonded`` (bool), ``moment``
+            on j/the particle [N] (the spring's plus a shear dashpot's), ``overlap`` [m], ``point`` [m], ``bonded`` (bool), ``moment``
             contact moment (bending/rolling + twisting) acting on j [N m].
         """
         p = self.particles
@@ -772,6 +780,13 @@ class Simulation:
         else:
             mom = np.zeros((ks.shape[0], 3))
         nb = self._c_p.shape[0]
+        # the shear force: the spring's and, with a shear dashpot, the dashpot's of the step
+        fs = hf[ks, K.H_FS:K.H_FS + 3]
+        if self._fv >= 0:
+            fs = fs + hf[ks, self._fv:self._fv + 3]
+        bfs = self._bhist[:, :3]
+        if self._bhist.shape[1] >= K.B_FV + 3:
+            bfs = bfs + self._bhist[:, K.B_FV:K.B_FV + 3]
         return {
             "i": np.concatenate([i, self._c_p]),
             "j": np.concatenate([j, -np.ones(nb, np.int64)]),
@@ -779,7 +794,7 @@ class Simulation:
             "element": np.concatenate([-np.ones(i.shape[0], np.int64), self._c_e]),
             "normal": np.concatenate([nrm, self._c_n]),
             "fn": np.concatenate([hf[ks, K.H_FN], self._bhist[:, 6]]),
-            "fs": np.concatenate([hf[ks, K.H_FS:K.H_FS + 3], self._bhist[:, :3]]),
+            "fs": np.concatenate([fs, bfs]),
             "overlap": np.concatenate([ov, self._c_d]),
             "point": np.concatenate([pt, self._c_pt]),
             "bonded": np.concatenate([bonded, np.zeros(nb, bool)]),

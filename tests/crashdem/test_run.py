@@ -193,3 +193,38 @@ def test_impact_young_factor_stiffens_the_impact_on_the_same_bed(tiny_result, tm
     assert dv == pytest.approx(dv_pred, rel=0.03, abs=0.05)
     f_lin = _impulse_balance(tiny_result)[2]
     assert np.max(np.abs(f)) > 1.2 * np.max(np.abs(f_lin))
+
+
+def test_shear_dashpot_from_the_scenario(tmp_path):
+    """``physics.contact_damping.shear`` gives the grains a shear dashpot at the contact
+    damping's restitution, ``soil.shear_restitution`` one of its own (the wall and the impactor
+    take none: a pair takes the smaller value, the grains'); off by default. Oracles: the
+    impulse-momentum balance of the drop mass holds with it, and its contact force differs from
+    the run with the normal dashpot alone on the same bed."""
+    from types import SimpleNamespace
+
+    from crashdem.run import impact_materials, soil_material
+
+    base = ROOT / "validation/scenarios/drop_s2_h5p00.toml"
+    damped = dict(TINY, **{"physics.contact_damping.enabled": True,
+                           "physics.contact_damping.restitution": 0.3,
+                           "scenario.name": "tiny_damped"})
+    normal = sc.load(base, damped)
+    shear = sc.load(base, dict(damped, **{"physics.contact_damping.shear": True,
+                                          "scenario.name": "tiny_shear"}))
+    bed = SimpleNamespace(materials=(soil_material(normal),))
+    assert [m.shear_restitution for m in impact_materials(normal, bed)] == [None] * 3
+    assert [m.shear_restitution for m in impact_materials(shear, bed)] == [0.3, None, None]
+    own = sc.load(base, dict(TINY, **{"soil.shear_restitution": 0.6}))
+    assert impact_materials(own, bed)[0].shear_restitution == 0.6
+    assert impact_materials(own, bed)[0].restitution is None
+    with pytest.raises(sc.ScenarioError, match="soil.shear_restitution"):
+        sc.load(base, dict(TINY, **{"soil.shear_restitution": 0.0}))
+    forces = []
+    for scen in (normal, shear):
+        path = run_scenario(scen, out_dir=tmp_path, progress=False)
+        dv, dv_pred, f = _impulse_balance(path)
+        assert dv == pytest.approx(dv_pred, rel=0.03, abs=0.05)
+        forces.append(f)
+    n = min(len(forces[0]), len(forces[1]))
+    assert np.max(np.abs(forces[1][:n] - forces[0][:n])) > 0.02 * np.max(np.abs(forces[0][:n]))
