@@ -284,8 +284,9 @@ def main(argv=None) -> int:
                     help="Yade's contact law for the truths: its linear Cundall-Strack law (the "
                          "model's) or its Hertz-Mindlin law, the default of most other DEM codes "
                          "(grains of cases.HERTZ_YOUNG_FACTOR x the Young's modulus, calibrated "
-                         "on the penetration); the cohesion and contact damping cases, made with "
-                         "laws of their own, are left out with it")
+                         "on the penetration); its contact damping is the Hertz-Mindlin law's "
+                         "own normal and shear dashpots of the drawn restitution; the cohesion "
+                         "cases, made with a law of their own, are left out with it")
     ap.add_argument("--on-yade-bed", action="store_true",
                     help="crashdem's baseline and runs on each case's own Yade bed "
                          "(soil.packing_file; the deposition shared, what is left is the "
@@ -324,7 +325,7 @@ def main(argv=None) -> int:
         left = [e for e in args.effects if e in OWN_LAW_EFFECTS]
         if left:
             print(f"--contact-law {args.contact_law}: {', '.join(left)} left out (Yade makes "
-                  f"them with laws of their own)")
+                  f"it with a law of its own)")
             args.effects = [e for e in args.effects if e not in OWN_LAW_EFFECTS]
     if args.scenario is not None:
         from crashdem.diagnosis.generator_dem import use_scenario

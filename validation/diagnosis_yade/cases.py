@@ -16,7 +16,10 @@ cohesion               ``CohFrictMat`` bonded bed, normal = shear cohesion 1-3e5
 particle_rotation      free grain rotations, no rolling resistance (crashdem: blocked)
 contact_damping        ``FrictViscoMat`` grains: a normal dashpot of restitution 0.1-0.3 on
                        every grain contact (``Law2_ScGeom_FrictViscoPhys_CundallStrackVisco``,
-                       whose dashpot may pull; crashdem's contact force never does)
+                       whose dashpot may pull; crashdem's contact force never does); with
+                       the Hertz-Mindlin law, ``MindlinPhys``'s dashpots of that restitution
+                       in the normal and the shear direction (``en`` = ``es``), as EDEM's
+                       and LIGGGHTS's Hertz-Mindlin laws damp (see ``yade_truth.py``)
 initial_conditions     impact speed offset +-2.5-4 m/s
 sensor_dynamics        the acceleration seen through ``MountDynamics`` 40-90 Hz, zeta
                        0.05-0.15, model "lowpass" or "mount"
@@ -107,8 +110,10 @@ HERTZ_POISSON = 0.25
 HERTZ_YOUNG_FACTOR = 4.0
 #: the contact law of every later case that does not name one (``use_contact_law``)
 CONTACT_LAW = "linear"
-#: effects Yade makes with laws of their own (the linear law's springs): not with another law
-OWN_LAW_EFFECTS = ("cohesion", "contact_damping")
+#: effects Yade makes with a law of their own (cohesion: ``CohFrictMat``'s linear springs and
+#: bonds), so not with another contact law. Contact damping is made with either law: the linear
+#: law's ``FrictViscoMat`` dashpot, or the Hertz-Mindlin law's own restitution dashpots
+OWN_LAW_EFFECTS = ("cohesion",)
 
 
 def bed_surface(x: np.ndarray, radius: np.ndarray, tank_radius: float) -> float:
@@ -353,7 +358,9 @@ def yade_case(seed: int, effect: str | None, *, cache: Path | None = None,
     Hertz-Mindlin law, its grains of ``HERTZ_YOUNG_FACTOR`` x the linear law's Young's modulus
     and ``HERTZ_POISSON``, on the bed the linear law's case of the
     same seed deposits; a null of it is a recording of the same physics by a code with another
-    contact law. Not with cohesion or contact damping (other laws in Yade)."""
+    contact law. Its contact damping is the Hertz-Mindlin law's own dashpots (the drawn
+    restitution in the normal and the shear direction, ``yade_truth.py``); not with cohesion
+    (another law in Yade)."""
     contact_law = CONTACT_LAW if contact_law is None else contact_law
     check_contact_law(contact_law, effect)
     if effect is not None and effect not in YADE_EFFECT_DRAWS:

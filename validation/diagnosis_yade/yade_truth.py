@@ -19,11 +19,22 @@ Yade 2023.02a's own numerics, from its own deposition to its own contact laws:
 3. the history (t, z, vz, Fz) of the drop mass every step -> ``<out>.npy`` (+ ``.json`` facts).
 
 ``contact_law = "hertz_mindlin"`` makes the impact with Yade's Hertz-Mindlin law instead
-(``Ip2_FrictMat_FrictMat_MindlinPhys`` + ``Law2_ScGeom_MindlinPhys_Mindlin``, no damping): the
-grains, the tank and the drop mass are ``FrictMat`` with the Young's modulus ``hertz_young`` (the
-layer's ``layer_young_factor`` x it) and Poisson's ratio ``hertz_poisson``. The deposition
-stays linear (the bed is the same as the linear law's for the same seed). Not with
-``cohesion`` or ``restitution``.
+(``Ip2_FrictMat_FrictMat_MindlinPhys`` + ``Law2_ScGeom_MindlinPhys_Mindlin``): the grains, the
+tank and the drop mass are ``FrictMat`` with the Young's modulus ``hertz_young`` (the layer's
+``layer_young_factor`` x it) and Poisson's ratio ``hertz_poisson``. The deposition stays linear
+(the bed is the same as the linear law's for the same seed). No damping unless
+``restitution`` is given; then the Ip2 functor's restitution ``en`` = ``es`` = ``restitution``
+on every contact (grain-grain, grain-tank, grain-drop mass), as EDEM and LIGGGHTS damp their
+Hertz-Mindlin law. Yade 2023.02a (measured on the binary, and its HertzMindlin.cpp): each
+contact's damping ratio is Thornton et al. 2013's (B6)-(B7) for a Hertzian contact that ends
+when its force reaches zero (``betan`` = 0.4536 for e = 0.3, against the linear law's 0.358),
+the dashpots ``c = 2 beta sqrt(m* k)`` with the tangent stiffnesses ``kn = 1.5 kno
+sqrt(delta)``, ``ks = kso sqrt(delta)``; the normal force is cut at zero (it never pulls: a
+head-on pair rebounds at 0.2995 of its approach speed for e = 0.3, 0.0993 for e = 0.1); the
+shear dashpot acts only while the contact sticks (sliding, the shear force is the Coulomb
+limit of the elastic one). The restitution is given as ``MatchMaker(algo="val")`` (what a
+float converts to; ``MatchMaker(matches=(), val=e)`` alone keeps ``algo="avg"`` and throws).
+Not with ``cohesion``.
 
 Everything else (the speed offset, the sensor, the acquisition) is applied by the driver.
 """
@@ -126,14 +137,15 @@ data = np.load(cfg["packing_npz"])
 x, rad = data["x"], data["radius"]
 coh = cfg.get("cohesion")
 e = cfg.get("restitution")
-# damping ratio of a linear spring-dashpot with restitution e (exact for a contact that may pull)
-beta = None if e is None else -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e) ** 2)
+hertz = cfg.get("contact_law", "linear") == "hertz_mindlin"
+if hertz and coh is not None:
+    raise SystemExit("contact_law='hertz_mindlin' is not made with cohesion")
+# linear law: damping ratio of a linear spring-dashpot with restitution e (exact for a contact
+# that may pull); the Hertz-Mindlin law takes e itself (MindlinPhys's en, es below)
+beta = None if e is None or hertz else -math.log(e) / math.sqrt(math.pi ** 2 + math.log(e) ** 2)
 # with a dashpot every material is a FrictViscoMat (the wall and the drop mass undamped, betan 0):
 # Yade's mixed FrictMat-FrictViscoMat functor takes the bodies in one order only
 other = None if beta is None else 0.0
-hertz = cfg.get("contact_law", "linear") == "hertz_mindlin"
-if hertz and (coh is not None or beta is not None):
-    raise SystemExit("contact_law='hertz_mindlin' is not made with cohesion or restitution")
 nu = cfg["hertz_poisson"] if hertz else None
 young = cfg["hertz_young"] if hertz else cfg["young"]
 m_up = frict(young, cfg["density"], cfg["friction_angle"], coh, beta, nu)
@@ -164,7 +176,13 @@ did = O.bodies.append(drop)  # noqa: F821
 # grain-grain geometry with the rotations the cohesion moments need; wall and facet contacts alike
 ig2 = [Ig2_Sphere_Sphere_ScGeom() if coh is None else Ig2_Sphere_Sphere_ScGeom6D(),  # noqa: F821
        Ig2_Wall_Sphere_ScGeom(), Ig2_Facet_Sphere_ScGeom()]  # noqa: F821
-if hertz:
+if hertz and e is not None:
+    # the same restitution in the normal and the shear direction, on every contact
+    ip2 = [Ip2_FrictMat_FrictMat_MindlinPhys(  # noqa: F821
+        en=MatchMaker(matches=(), algo="val", val=e),  # noqa: F821
+        es=MatchMaker(matches=(), algo="val", val=e))]  # noqa: F821
+    law = [Law2_ScGeom_MindlinPhys_Mindlin()]  # noqa: F821
+elif hertz:
     ip2 = [Ip2_FrictMat_FrictMat_MindlinPhys()]  # noqa: F821
     law = [Law2_ScGeom_MindlinPhys_Mindlin()]  # noqa: F821
 elif beta is not None:
