@@ -137,15 +137,16 @@ def test_integrator_observed_order_two():
 ROUND_OFF = 1e-12  # relative to the sum of force magnitudes (double precision, ~1e2 terms)
 
 
-def test_internal_forces_sum_to_zero():
+@pytest.mark.parametrize("shear", [None, 0.3], ids=["normal-dashpot", "shear-dashpot-too"])
+def test_internal_forces_sum_to_zero(shear):
     """Oracle: Newton's third law / conservation of momentum and angular momentum: without
     gravity and boundaries, sum F = 0 and sum (x x F + T) = 0 to round-off (free rotations,
-    friction, rolling resistance and damping all on)."""
+    friction, rolling resistance and damping all on; with and without a shear dashpot)."""
     rng = np.random.default_rng(3)
     n = 60
     x = rng.uniform(0, 0.35, (n, 3))
     r = rng.uniform(0.04, 0.06, n)
-    m0 = mat(0.5, restitution=0.5, rolling=soil.Rolling(0.1))
+    m0 = mat(0.5, restitution=0.5, rolling=soil.Rolling(0.1), shear_restitution=shear)
     p = soil.Particles(x=x, radius=r, rotation_blocked=False,
                        v=rng.normal(0, 0.5, (n, 3)), w=rng.normal(0, 5, (n, 3)))
     sim = soil.Simulation(p, [m0], gravity=(0, 0, 0))

@@ -1,6 +1,6 @@
 """The viscous shear dashpot (``Material.shear_restitution``): a sticking contact's tangential
 motion is the damped oscillator of its shear spring and dashpot, a sliding contact is not
-damped by it, the pair and body contacts conserve momentum, and its work is booked in
+damped by it, a body's reaction includes it, and its work is booked in
 ``dissipated_viscous``."""
 
 from __future__ import annotations
@@ -159,11 +159,11 @@ def test_a_sliding_contact_is_not_damped_by_the_shear_dashpot(law):
     assert v_end == pytest.approx(u0 - math.tan(phi) * G * t, abs=2e-3)
 
 
-def test_shear_dashpot_conserves_momentum_and_balances_energy():
-    """Oracle: Newton's third law (sum F = 0, sum x x F + T = 0 to round-off) for a free cloud
-    with free rotations, friction, rolling resistance and both dashpots; and conservation of
-    energy with the shear dashpot's work in dissipated_viscous, which exceeds the normal
-    dashpot's alone on the same cloud."""
+def test_shear_dashpot_balances_energy():
+    """Oracle: conservation of energy in a free cloud with free rotations, friction, rolling
+    resistance and both dashpots (1 % of the initial energy), with the shear dashpot's work in
+    dissipated_viscous, which exceeds the normal dashpot's alone on the same cloud (Newton's
+    third law with it: ``test_engine.py::test_internal_forces_sum_to_zero``)."""
     rng = np.random.default_rng(5)
     n = 60
     x = rng.uniform(0, 0.35, (n, 3))
@@ -178,16 +178,7 @@ def test_shear_dashpot_conserves_momentum_and_balances_energy():
         e_start = sim.energy()
         total0 = (e_start["kinetic_translational"] + e_start["kinetic_rotational"]
                   + e_start["elastic"])
-        for _ in range(3):
-            sim.step(20)
-            f = sim.particles.f
-            t = sim.particles.t
-            scale = np.abs(f).sum()
-            assert scale > 0
-            assert np.abs(f.sum(axis=0)).max() < 1e-12 * scale
-            lever = np.cross(sim.particles.x, f)
-            ang = lever.sum(axis=0) + t.sum(axis=0)
-            assert np.abs(ang).max() < 1e-12 * (np.abs(lever).sum() + np.abs(t).sum())
+        sim.step(60)
         en = sim.energy()
         assert abs(en["balance_error"]) < 1e-2 * total0
         visc.append(en["dissipated_viscous"])
