@@ -5,9 +5,12 @@ Yade 2023.02a on this machine kind: ~3.8e5 (1 thread, 11.6k spheres) and 2.9e5 p
 (100k) (anchors section 8); the target is >= 1.2e6 on 1 thread for 50k particles.
 
 ``--hertz`` also runs the same scene with the Hertz-Mindlin law (``Material.contact_law``) and
-prints its rate over the linear law's, measured in the same run.
+prints its rate over the linear law's, measured in the same run. ``--shear`` runs it with a
+normal dashpot (restitution 0.3) and then with a shear dashpot too (``shear_restitution`` 0.3)
+and prints the second's rate over the first's.
 
 Usage: python validation/perf_soil_kernels.py [--n 50000] [--steps 200] [--small] [--hertz]
+[--shear]
 """
 
 from __future__ import annotations
@@ -27,11 +30,12 @@ V_IMPACT = 19.0  # [m/s]
 
 
 def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False,
-          law: str = "linear") -> soil.Simulation:
+          law: str = "linear", damping: dict | None = None) -> soil.Simulation:
     """Cubic lattice (spacing 2 R_MEAN, radii R_MEAN (1 +- R_SPREAD)/(1 + R_SPREAD)) in an open
     box with the sphere just touching the bed surface, moving down at 19 m/s (coupled-body
     kinematics). ``fcc=True``: face-centred cubic lattice (12 neighbours at 2 R_MEAN, a much
-    denser contact network: the harder benchmark)."""
+    denser contact network: the harder benchmark). ``damping``: ``Material`` keywords of its
+    dashpots (``restitution``, ``shear_restitution``)."""
     h = 2.0 * R_MEAN
     if fcc:
         a = h * np.sqrt(2.0)  # cubic cell edge for nearest-neighbour distance h
@@ -49,7 +53,8 @@ def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False,
     rng = np.random.default_rng(seed)
     r = R_MEAN * (1.0 + R_SPREAD * rng.uniform(-1.0, 1.0, x.shape[0])) / (1.0 + R_SPREAD)
     mat = soil.Material(young=2e7, density=2650.0, friction_angle=np.radians(30.0),
-                        stiffness_ratio=0.25, name="gravel", contact_law=law)
+                        stiffness_ratio=0.25, name="gravel", contact_law=law,
+                        **(damping or {}))
     p = soil.Particles(x=x, radius=r, material=0, rotation_blocked=True)
     top = float(x[:, 2].max()) + R_MEAN
     box = soil.BoundaryBody(shapes=[soil.Box((0, 0, 0), (side_len, side_len, 4 * side_len))])
@@ -59,9 +64,10 @@ def build(n_target: int, threads: int, seed: int = 1, fcc: bool = False,
     return soil.Simulation(p, [mat], [box, sphere], threads=threads)
 
 
-def measure(n: int, steps: int, threads: int, fcc: bool = False, law: str = "linear") -> dict:
+def measure(n: int, steps: int, threads: int, fcc: bool = False, law: str = "linear",
+            damping: dict | None = None) -> dict:
     numba.set_num_threads(threads)
-    sim = build(n, threads, fcc=fcc, law=law)
+    sim = build(n, threads, fcc=fcc, law=law, damping=damping)
     sim.step(5)  # warm-up (compilation is cached on disk)
     b0 = sim.n_builds
     t0 = time.perf_counter()
@@ -94,6 +100,9 @@ def main(argv=None):
     ap.add_argument("--fcc", action="store_true", help="dense FCC lattice instead of cubic")
     ap.add_argument("--hertz", action="store_true",
                     help="also the Hertz-Mindlin law, its rate over the linear law's")
+    ap.add_argument("--shear", action="store_true",
+                    help="also a normal dashpot, then normal and shear dashpots: the second's "
+                         "rate over the first's")
     a = ap.parse_args(argv)
     n, steps = (2_000, 20) if a.small else (a.n, a.steps)
     out = []
@@ -118,6 +127,19 @@ def main(argv=None):
             print(f"threads={th} Hertz-Mindlin: {hz['particle_steps_per_cpu_s']:.3e} per CPU-s, "
                   f"{hz['particle_steps_per_cpu_s'] / res['particle_steps_per_cpu_s']:.2f} x "
                   f"the linear law's; memory {hz['bytes_per_particle']:.0f} B/particle")
+        if a.shear:
+            rates = []
+            for damping in ({"restitution": 0.3},
+                            {"restitution": 0.3, "shear_restitution": 0.3}):
+                d = measure(n, steps, th, a.fcc, damping=damping)
+                d["damping"] = damping
+                out.append(d)
+                rates.append(d["particle_steps_per_cpu_s"])
+                print(f"threads={th} dashpots {damping}: {rates[-1]:.3e} per CPU-s; memory "
+                      f"{d['bytes_per_particle']:.0f} B/particle")
+            print(f"threads={th} the shear dashpot: {rates[1] / rates[0]:.2f} x the rate of the "
+                  f"normal dashpot alone (undamped: {rates[0] / res['particle_steps_per_cpu_s']:.2f}"
+                  f" x for the normal one)")
     numba.set_num_threads(prev)
     return out
 
