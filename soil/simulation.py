@@ -214,17 +214,17 @@ class Simulation:
         self._has_rot = bool(np.any(~p.rotation_blocked))
         self._has_coh = any(m.cohesion is not None for m in materials)
         self._has_roll = self._has_rot and any(m.rolling is not None for m in materials)
-        self._has_svisc = any(m.shear_restitution is not None and m.shear_restitution < 1.0
-                              for m in materials)
-        self._has_visc = self._has_svisc or any(
+        svisc = any(m.shear_restitution is not None and m.shear_restitution < 1.0
+                    for m in materials)
+        self._has_visc = svisc or any(
             m.restitution is not None and m.restitution < 1.0 for m in materials)
         self._has_mom = self._has_rot and (self._has_coh or self._has_roll)
         self._has_hertz = any(m.contact_law == "hertz_mindlin" for m in materials)
         # Hertz-Mindlin: one more column, the last step's overlap (the kernels' last column)
         base = K.H_NCOL_FULL if (self._has_coh or self._has_roll) else K.H_NCOL_BASIC
         # a shear dashpot: three columns of the pairs' viscous shear forces after the layout
-        self._fv = base if self._has_svisc else -1
-        self._ncol = base + 3 * int(self._has_svisc) + int(self._has_hertz)
+        self._fv = base if svisc else -1
+        self._ncol = base + 3 * int(svisc) + int(self._has_hertz)
         self._nicol = 1 if self._has_coh else 0
         # boundary elements (analytic first, then mesh triangles)
         etype, ebody, ep, en, er, ea0, ea1 = [], [], [], [], [], [], []
@@ -759,8 +759,9 @@ class Simulation:
             ``i`` particle, ``j`` second particle (-1 for a boundary), ``body`` (-1 for particle
             pairs), ``element`` (boundary element id, -1 for pairs), ``normal`` (from i/the wall
             towards j/the particle), ``fn`` normal force [N] (compression > 0), ``fs`` shear force
-            on j/the particle [N] (the spring's plus a shear dashpot's), ``overlap`` [m], ``point`` [m], ``bonded`` (bool), ``moment``
-            contact moment (bending/rolling + twisting) acting on j [N m].
+            on j/the particle [N] (the spring's plus a shear dashpot's), ``overlap`` [m],
+            ``point`` [m], ``bonded`` (bool), ``moment`` contact moment (bending/rolling +
+            twisting) acting on j [N m].
         """
         p = self.particles
         hf = self._hf
@@ -785,6 +786,8 @@ class Simulation:
         if self._fv >= 0:
             fs = fs + hf[ks, self._fv:self._fv + 3]
         bfs = self._bhist[:, :3]
+        # a state restored from a checkpoint written before B_FV keeps its narrower history
+        # until the next step
         if self._bhist.shape[1] >= K.B_FV + 3:
             bfs = bfs + self._bhist[:, K.B_FV:K.B_FV + 3]
         return {

@@ -137,9 +137,9 @@ def main(argv=None):
                 rates.append(d["particle_steps_per_cpu_s"])
                 print(f"threads={th} dashpots {damping}: {rates[-1]:.3e} per CPU-s; memory "
                       f"{d['bytes_per_particle']:.0f} B/particle")
+            normal = rates[0] / res["particle_steps_per_cpu_s"]
             print(f"threads={th} the shear dashpot: {rates[1] / rates[0]:.2f} x the rate of the "
-                  f"normal dashpot alone (undamped: {rates[0] / res['particle_steps_per_cpu_s']:.2f}"
-                  f" x for the normal one)")
+                  f"normal dashpot alone (undamped: {normal:.2f} x for the normal one)")
     numba.set_num_threads(prev)
     return out
 
