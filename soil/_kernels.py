@@ -21,7 +21,6 @@ from soil.contact_laws import (
     cohesive_shear_cap,
     LAW_HERTZ_MINDLIN,
     damping_coefficient,
-    damping_ratio,
     hertz_coefficients,
     hertz_damping_coefficient,
     hertz_normal_dissipation,
@@ -85,7 +84,11 @@ M_TENSION = 15  # > 0: the normal dashpot may pull while the contact opens
 M_LAW = 16  # contact_laws.LAW_LINEAR / LAW_HERTZ_MINDLIN
 M_POISSON = 17  # Poisson's ratio (Hertz-Mindlin)
 M_SHEAR_RESTITUTION = 18  # shear dashpot; 1.0 = none
-M_NCOL = 19
+# contact_laws.damping_ratio of M_RESTITUTION / M_SHEAR_RESTITUTION (the same compiled function,
+# so the same bits as evaluating it per contact; 0.0 for 1.0 = none)
+M_ZETA = 19
+M_SHEAR_ZETA = 20
+M_NCOL = 21
 
 # pair state flags
 BOND_NONE = 0
@@ -581,16 +584,29 @@ def _shear_trial(vrx, vry, vrz, nx, ny, nz, fx, fy, fz, n0x, n0y, n0z, twist, ks
 
 
 @numba.njit(cache=True, inline="always")
-def _shear_dashpot(e_s, m_eff, ks, hertz, dux, duy, duz, dt):
-    """Viscous shear force of a sticking contact whose shear restitution is ``e_s`` < 1 and the
-    energy it dissipates over the step: ``f_v = -c_s du / dt`` with c_s the critical damping of
-    the shear spring ``ks`` (tangent, Hertz-Mindlin: Tsuji's form, as the normal dashpot's)
-    scaled by ``damping_ratio(e_s)``, and ``c_s |du|^2 / dt`` [J]; returns ``(fvx, fvy, fvz,
-    dissipated)``."""
+def _pair_damping(mat, a, b, e_col, z_col):
+    """Restitution and damping ratio of a contact between materials ``a`` and ``b``: the lower
+    restitution ``e = min(mat[a, e_col], mat[b, e_col])`` and ``damping_ratio(e)``, read from
+    the table's column ``z_col`` of the material that has it (``M_ZETA`` / ``M_SHEAR_ZETA``,
+    filled by the same compiled ``damping_ratio``: the same bits as evaluating it here, without
+    its log and square root per contact and step); returns ``(e, zeta)``."""
+    ea = mat[a, e_col]
+    eb = mat[b, e_col]
+    if ea <= eb:
+        return ea, mat[a, z_col]
+    return eb, mat[b, z_col]
+
+
+@numba.njit(cache=True, inline="always")
+def _shear_dashpot(zeta, m_eff, ks, hertz, dux, duy, duz, dt):
+    """Viscous shear force of a sticking contact whose shear restitution e_s < 1 has the damping
+    ratio ``zeta`` = ``damping_ratio(e_s)`` (``_pair_damping``) and the energy it dissipates over
+    the step: ``f_v = -c_s du / dt`` with c_s the critical damping of the shear spring ``ks``
+    (tangent, Hertz-Mindlin: Tsuji's form, as the normal dashpot's) scaled by ``zeta``, and
+    ``c_s |du|^2 / dt`` [J]; returns ``(fvx, fvy, fvz, dissipated)``."""
     if dt <= 0.0:
         # the force evaluation before the first step (no displacement, no rate yet)
         return 0.0, 0.0, 0.0, 0.0
-    zeta = damping_ratio(e_s)
     if hertz:
         cs = hertz_damping_coefficient(zeta, m_eff, ks)
     else:
@@ -752,13 +768,13 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                     cn = 0.0
                     pulls = False
                     if has_visc:
-                        e_pair = min(mat[mi, M_RESTITUTION], mat[mj, M_RESTITUTION])
+                        e_pair, zeta = _pair_damping(mat, mi, mj, M_RESTITUTION, M_ZETA)
                         if e_pair < 1.0:
                             m_eff = mass[i] * mass[j] / (mass[i] + mass[j])
                             if hertz:
-                                cn = hertz_damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                                cn = hertz_damping_coefficient(zeta, m_eff, kn)
                             else:
-                                cn = damping_coefficient(damping_ratio(e_pair), m_eff, kn)
+                                cn = damping_coefficient(zeta, m_eff, kn)
                             pulls = mat[mi, M_TENSION] > 0.0 or mat[mj, M_TENSION] > 0.0
                     fn_old = hf[k, H_FN]
                     if hertz:
@@ -780,10 +796,11 @@ def pair_forces(x, v, w, radius, mass, mat_id, mat, row_start, nbr, hf, hi, tq, 
                         fric_acc += spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,
                                                        ks)
                     if fv >= 0 and not slid:
-                        e_s = min(mat[mi, M_SHEAR_RESTITUTION], mat[mj, M_SHEAR_RESTITUTION])
+                        e_s, zeta_s = _pair_damping(mat, mi, mj, M_SHEAR_RESTITUTION,
+                                                    M_SHEAR_ZETA)
                         if e_s < 1.0:
                             fvx, fvy, fvz, wv = _shear_dashpot(
-                                e_s, mass[i] * mass[j] / (mass[i] + mass[j]), ks, hertz, dux,
+                                zeta_s, mass[i] * mass[j] / (mass[i] + mass[j]), ks, hertz, dux,
                                 duy, duz, dt)
                             visc_acc += wv
                 hf[k, H_FS] = fsx
@@ -1166,12 +1183,12 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
         cn = 0.0
         pulls = False
         if has_visc:
-            e_pair = min(mat[mb, M_RESTITUTION], mat[mi, M_RESTITUTION])
+            e_pair, zeta = _pair_damping(mat, mb, mi, M_RESTITUTION, M_ZETA)
             if e_pair < 1.0:
                 if hertz:
-                    cn = hertz_damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+                    cn = hertz_damping_coefficient(zeta, mass[i], kn)
                 else:
-                    cn = damping_coefficient(damping_ratio(e_pair), mass[i], kn)
+                    cn = damping_coefficient(zeta, mass[i], kn)
                 pulls = mat[mb, M_TENSION] > 0.0 or mat[mi, M_TENSION] > 0.0
         fn_old = 0.0
         mox = 0.0
@@ -1193,9 +1210,9 @@ def boundary_forces(x, v, w, radius, mass, mat_id, mat, c_p, c_e, c_n, c_d, c_pt
         fvy = 0.0
         fvz = 0.0
         if has_visc and not slid:
-            e_s = min(mat[mb, M_SHEAR_RESTITUTION], mat[mi, M_SHEAR_RESTITUTION])
+            e_s, zeta_s = _pair_damping(mat, mb, mi, M_SHEAR_RESTITUTION, M_SHEAR_ZETA)
             if e_s < 1.0:
-                fvx, fvy, fvz, wv = _shear_dashpot(e_s, mass[i], ks, hertz, dux, duy, duz, dt)
+                fvx, fvy, fvz, wv = _shear_dashpot(zeta_s, mass[i], ks, hertz, dux, duy, duz, dt)
                 b_diss[b, 1] += wv
         if hertz:
             b_diss[b, 0] += varying_spring_dissipation(ox, oy, oz, fsx, fsy, fsz, dux, duy, duz,

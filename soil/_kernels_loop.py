@@ -20,7 +20,7 @@ import numpy as np
 from soil import _kernels as K
 
 #: digest of the jitted sources compiled in (see the module docstring)
-NUMBA_CACHE_DEPENDS = "214ec451d08c8c1a"
+NUMBA_CACHE_DEPENDS = "0d15053699de72bb"
 
 _integrate = K.integrate.parallel
 _scan = K.scan_neighbours.parallel

@@ -13,7 +13,7 @@ import numpy as np
 from soil import _kernels as K
 from soil import _kernels_loop as L
 from soil.boundaries import BoundaryBody
-from soil.contact_laws import CONTACT_LAWS
+from soil.contact_laws import CONTACT_LAWS, damping_ratio
 from soil.energy import balance, kinetic
 from soil.params import Material
 from soil.particles import Particles
@@ -47,6 +47,9 @@ def _material_table(materials: Sequence[Material]) -> np.ndarray:
         tab[m, K.M_TENSION] = 1.0 if mat.dashpot_tension else 0.0
         tab[m, K.M_SHEAR_RESTITUTION] = (1.0 if mat.shear_restitution is None
                                          else mat.shear_restitution)
+        # the kernels read the damping ratios of these (the same compiled function: same bits)
+        tab[m, K.M_ZETA] = damping_ratio(tab[m, K.M_RESTITUTION])
+        tab[m, K.M_SHEAR_ZETA] = damping_ratio(tab[m, K.M_SHEAR_RESTITUTION])
         tab[m, K.M_DENSITY] = mat.density
         tab[m, K.M_LAW] = CONTACT_LAWS.index(mat.contact_law)
         tab[m, K.M_POISSON] = mat.poisson
