@@ -9,13 +9,18 @@
     python validation/diagnose_cost.py --effect none --recalibrate soil.material.young=4e7
     python validation/diagnose_cost.py --effect none --truth-grains 1.25 \
         --cli-args "--grain-fit 0.8,1.25,1.5"      # a truth of coarser grains
+    python validation/diagnose_cost.py --effect none --truth-law hertz_mindlin \
+        --truth-young-factor 8                      # a truth in another contact law
 
 Truth: ``validation/scenarios/drop_s2_h13p70.toml`` at its resolution (0.075 m grains, 6 m
 tank, the compacted layer below 1 m) with another packing seed (7), ``solver.safety`` 0.2
 (baseline 0.3), the concealed effect switched on (``--effect none``: no effect; ``--recalibrate KEY=VALUE``:
 a soil value other than the scenario's, ``generator_dem.check_recalibration``, a
 recalibration that must not be named missing physics; ``--truth-grains F``: grains F x the
-scenario's 0.075 m, as another code's recording has grains the scenario does not know),
+scenario's 0.075 m, as another code's recording has grains the scenario does not know;
+``--truth-law hertz_mindlin --truth-young-factor F``: the truth's impact in the Hertz-Mindlin
+law, most DEM codes' default, at F x the grains' modulus on the same kind of bed, a law and a
+stiffness the scenario does not have),
 sampled at 50 kHz and acquired like a lab channel (``generator.acquire_samples``: 12.5 kHz,
 noise, +-2 ms trigger, CFC 60), written as CSV. Then the command a user runs, ``crashdem diagnose
 --scenario drop_s2_h13p70.toml --recording rec.csv --out DIR``, is run as a subprocess and timed:
@@ -38,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import shlex
 import shutil
 import subprocess
@@ -79,12 +85,32 @@ def check_grains(grains: float) -> float:
     return float(grains)
 
 
+def check_law(law: str, young_factor: float) -> tuple[str, float]:
+    """The truth's contact law and impact modulus factor (``--truth-law``,
+    ``--truth-young-factor``); ValueError naming the field and what it may be."""
+    from crashdem.scenario import SCHEMA
+
+    laws = SCHEMA["soil"]["contact_law"].choices
+    if law not in laws:
+        raise ValueError(f"law={law!r}: must be one of {', '.join(laws)} (soil.contact_law)")
+    spec = SCHEMA["soil"]["impact_young_factor"]
+    if not (math.isfinite(float(young_factor))
+            and float(spec.lo) <= float(young_factor) <= float(spec.hi)):
+        raise ValueError(f"young_factor={young_factor!r}: must be in [{spec.lo:g}, {spec.hi:g}] "
+                         "(soil.impact_young_factor)")
+    return law, float(young_factor)
+
+
 def truth_recording(effect: str | None, value: float, out: Path, threads: int,
                     recalibration: dict[str, float] | None = None,
-                    grains: float = 1.0) -> Path:
+                    grains: float = 1.0, law: str = "linear",
+                    young_factor: float = 1.0) -> Path:
     """Run (or load) the default-resolution truth and write the lab recording as CSV
     (``effect`` None: no effect; ``recalibration``: the truth's other soil values; ``grains``:
-    the truth's grain radius over the scenario's, within ``TRUTH_GRAINS``)."""
+    the truth's grain radius over the scenario's, within ``TRUTH_GRAINS``; ``law`` and
+    ``young_factor``: the contact law of its impact and the factor on the grains' modulus
+    there, ``soil.contact_law`` and ``soil.impact_young_factor``, the bed deposited as the
+    scenario's)."""
     import numpy as np
 
     from crashdem.diagnosis.generator import acquire_samples
@@ -97,6 +123,9 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
     grains = check_grains(grains)
     if grains != 1.0:
         ov["soil.radius"] = DEFAULT_RESOLUTION["soil.radius"] * grains
+    law, young_factor = check_law(law, young_factor)
+    if law != "linear" or young_factor != 1.0:
+        ov.update({"soil.contact_law": law, "soil.impact_young_factor": float(young_factor)})
     if effect is not None:
         ov.update({f"physics.{effect}.enabled": True, EFFECT_KEYS[effect]: value,
                    **EFFECT_EXTRA.get(effect, {})})
@@ -115,7 +144,9 @@ def truth_recording(effect: str | None, value: float, out: Path, threads: int,
                                  + "".join(f", {k} = {v:g}" for k, v in
                                            (recalibration or {}).items())
                                  + (f", grains {grains:g} x the scenario's" if grains != 1.0
-                                    else "") + ")")
+                                    else "")
+                                 + (f", {law} law at {young_factor:g} x the modulus"
+                                    if law != "linear" or young_factor != 1.0 else "") + ")")
     out.mkdir(parents=True, exist_ok=True)
     return write_recording(out / "rec.csv", rec)
 
@@ -125,8 +156,6 @@ def baseline_wall(diag: Path) -> float | None:
     the result file's ``wall_time`` attribute: the coupled impact, written after the bed is
     built, so the deposition is not in it): the same-run reference of the benchmark's ratio.
     None when the diagnosis took an existing result instead."""
-    import math
-
     import h5py
 
     for path in sorted((diag / "baseline").glob("*.h5")):
@@ -153,6 +182,12 @@ def main(argv=None) -> int:
     ap.add_argument("--truth-grains", type=float, default=1.0, metavar="F",
                     help="the truth's grain radius as F x the scenario's 0.075 m (in "
                          f"[{TRUTH_GRAINS[0]:g}, {TRUTH_GRAINS[1]:g}]; default 1)")
+    ap.add_argument("--truth-law", choices=["linear", "hertz_mindlin"], default="linear",
+                    help="the contact law of the truth's impact (default linear, the "
+                         "scenario's)")
+    ap.add_argument("--truth-young-factor", type=float, default=1.0, metavar="F",
+                    help="the truth's grain modulus in its impact as F x the scenario's "
+                         "(soil.impact_young_factor; its bed is deposited as the scenario's)")
     ap.add_argument("--cli-args", default="", metavar="ARGS",
                     help="more options of crashdem diagnose, e.g. \"--grain-check 1.1,0.9 "
                          "--grain-check-agree any\"")
@@ -170,7 +205,12 @@ def main(argv=None) -> int:
         check_grains(args.truth_grains)
     except ValueError as err:
         ap.error(f"--truth-grains: {err}")
-    rec = truth_recording(effect, args.value, out, args.threads, recal, args.truth_grains)
+    try:
+        check_law(args.truth_law, args.truth_young_factor)
+    except ValueError as err:
+        ap.error(f"--truth-law / --truth-young-factor: {err}")
+    rec = truth_recording(effect, args.value, out, args.threads, recal, args.truth_grains,
+                          args.truth_law, args.truth_young_factor)
     t_truth = time.perf_counter() - t0
     cache = out / "packing_cache"
     shutil.rmtree(cache, ignore_errors=True)
@@ -202,6 +242,7 @@ def main(argv=None) -> int:
     named = next((h for h in rep["hypotheses"] if h["name"] == rep["missing_physics"]), None)
     row = {"truth": effect, "value": args.value if effect else None,
            "recalibration": recal, "truth_grains": args.truth_grains,
+           "truth_law": args.truth_law, "truth_young_factor": args.truth_young_factor,
            "claimed": rep["missing_physics"],
            "parameters": named["parameters"] if named else None,
            "score_before": rep["fit"]["before"]["overall"],

@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH",
            "STIFFER_SOIL_FACTORS", "DAMPING_FORMS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
-           "layer_level_factor",
+           "layer_level_factor", "BedFloor",
            "stiffer_soil_depths",
            "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "Catalogue", "DROP", "drop_catalogue", "planar_catalogue",
@@ -627,6 +627,42 @@ def hertz_floor_overrides(fs: FullSearch | None) -> dict[str, Any] | None:
         return None
     ov = stiffer_soil_overrides(fs, fs.hertz_floor)
     return None if ov is None else {**ov, "soil.contact_law": "hertz_mindlin"}
+
+
+@dataclass(frozen=True)
+class BedFloor:
+    """The realisation floor's stiffer soil on a search that has no layering to make it with
+    (``stiffer_soil_overrides`` needs the layering searched in its stiffness form): a scenario
+    with its own layering, such as the reference campaign's compacted lower part, where the
+    layering is the scenario's physics and is not searched. The whole bed (both layers, and a
+    wall of the soil's modulus) is made stiffer through the grains' impact modulus
+    (``soil.impact_young_factor``) on the same bed, at each of ``factors``; with ``hertz`` the
+    whole bed also runs in the Hertz-Mindlin contact law at that factor (a linear scenario's,
+    as ``FullSearch.hertz_floor``). The bed below its top grain row (``stiffer_soil_depths``)
+    has no such run: it would be a second layer."""
+
+    factors: tuple[float, ...] = STIFFER_SOIL_FACTORS
+    hertz: float | None = None
+
+    def __post_init__(self) -> None:
+        from crashdem.scenario import SCHEMA
+
+        spec = SCHEMA["soil"]["impact_young_factor"]
+        lo, hi = float(spec.lo), float(spec.hi)
+        for name, fs in (("factors", self.factors),
+                         ("hertz", () if self.hertz is None else (self.hertz,))):
+            for f in fs:
+                if not (isinstance(f, (int, float)) and math.isfinite(f) and lo <= f <= hi):
+                    raise ValueError(f"BedFloor.{name}: {f!r} must be in [{lo:g}, {hi:g}] (the "
+                                     "grains' impact modulus factor, soil.impact_young_factor)")
+
+    def overrides(self) -> list[tuple[float, dict[str, Any]]]:
+        """(factor, scenario overrides) of each run, the Hertz-Mindlin one last."""
+        out = [(float(f), {"soil.impact_young_factor": float(f)}) for f in self.factors]
+        if self.hertz is not None:
+            out.append((float(self.hertz), {"soil.impact_young_factor": float(self.hertz),
+                                            "soil.contact_law": "hertz_mindlin"}))
+        return out
 
 
 def _stiffness_form_keys(fs: FullSearch | None) -> dict[str, Any] | None:

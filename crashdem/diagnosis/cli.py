@@ -23,7 +23,7 @@ import functools
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -398,6 +398,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
         searched, search_sim, search_how = _search_setup(
             scen, planar, getattr(args, "full_search", None) or "auto", cmap, Path(args.out),
             packing_cache=pcache, run_cache=rcache)
+        bed_floor = _bed_floor(scen, searched)
         reps = _replicates(scen, getattr(args, "replicates", None), bool(searched))
         numerics = _numerics_scales(getattr(args, "numerics_check", None))
         grain = _grain_scales(getattr(args, "grain_check", None))
@@ -420,7 +421,7 @@ def _diagnose_command(args: argparse.Namespace) -> int:
                                   grain_check=grain, grain_fit=gfit,
                                   grain_fit_simulator=gfit_sim,
                                   law_fit=lfit, law_fit_law=lfit_law,
-                                  law_fit_stiffness=lfit_own,
+                                  law_fit_stiffness=lfit_own, bed_floor=bed_floor,
                                   grain_agree=getattr(args, "grain_check_agree", None)
                                   or GRAIN_CHECK_AGREE, **cat_kw)
         rep.simulations["full_search"] = search_how
@@ -817,6 +818,23 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
         f"{len(searched)} effects at the coarse resolution ({tier}), the leading ones confirmed "
         f"at the scenario's" + (" (the coarse tier on deposited beds: the imported bed is the "
                                 "scenario's only)" if bed is not None else "") + note)
+
+
+def _bed_floor(scen, searched: Mapping[str, Any]) -> Any:
+    """The realisation floor's stiffer soil (``catalogue.BedFloor``) for a search in which the
+    layering is not searched because the scenario has its own (the reference campaign's
+    compacted lower part): the whole bed x2 / x5 stiffer through the grains' impact modulus,
+    and for a linear scenario the whole bed in the Hertz-Mindlin law at
+    ``HERTZ_FLOOR_YOUNG_FACTOR``, as the layering's stiffness form gives them on a uniform
+    bed. None when nothing is searched, the layering is searched, or the scenario has no
+    layering of its own."""
+    from crashdem.diagnosis.catalogue import HERTZ_FLOOR_YOUNG_FACTOR, BedFloor
+
+    if not searched or "soil_layering" in searched or not scen.get(
+            "physics.soil_layering.enabled"):
+        return None
+    return BedFloor(hertz=HERTZ_FLOOR_YOUNG_FACTOR
+                    if scen.get("soil.contact_law") == "linear" else None)
 
 
 def grain_fit_tier(scen) -> dict[str, Any]:

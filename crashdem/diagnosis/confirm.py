@@ -179,6 +179,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         law_fit: Sequence[float] = LAW_FIT_FACTORS,
                         law_fit_law: str = "hertz_mindlin",
                         law_fit_stiffness: Sequence[float] | None = None,
+                        bed_floor: catalogue.BedFloor | None = None,
                         **diagnose_kw) -> Report:
     """ROM screening, then confirmation of the top-k hypotheses with the expensive simulator.
 
@@ -274,6 +275,13 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
         law stands and that modulus is taken: a recalibration of the soil's stiffness, made as
         the law's is (``law_choice``). A law fit without them cannot tell a contact law from
         a stiffness (measured on Yade's linear recordings: 9 of 12 moved to Hertz-Mindlin)
+    bed_floor : the realisation floor's stiffer soil when the layering is not searched
+        (``catalogue.BedFloor``; the command line gives it for a scenario with its own
+        layering): the whole bed made stiffer through the grains' impact modulus, and in the
+        Hertz-Mindlin law, on each bed of a deposited level, run beside the replicates as the
+        layering's stiffness form runs them otherwise (``_Confirmation.stiffer_requests``).
+        None: no stiffer soil in the floor when the layering is not searched. After a law fit
+        that takes the other law its Hertz-Mindlin run is left out, as ``FullSearch.hertz_floor``
     diagnose_kw : passed to :func:`crashdem.diagnosis.diagnose`
 
     Returns
@@ -317,7 +325,8 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                          "level of an effect that deposits its own bed)")
     p = _confirm_pass(baseline_signals, recording_signals, full_simulator, search_simulator,
                       top_k=top_k, full_search=full_search, replicates=replicates,
-                      level_beds=level_beds, numerics=numerics, **diagnose_kw)
+                      level_beds=level_beds, numerics=numerics, bed_floor=bed_floor,
+                      **diagnose_kw)
     fitted = None
     if grain_fit and not p.c.model_free and not p.c.cfc_key:
         fitted = _grain_fit(p, grain_fit, replicates, grain_fit_simulator)
@@ -328,7 +337,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             p, full_simulator, search_simulator = _scaled_pass(
                 f, recording_signals, full_simulator, search_simulator, top_k=top_k,
                 full_search=full_search, replicates=replicates, level_beds=level_beds,
-                numerics=numerics, **diagnose_kw)
+                numerics=numerics, bed_floor=bed_floor, **diagnose_kw)
             _moved(fitted, "at_model_grains", "grain_fit", at_model, p,
                    _runs_made(full_simulator, search_simulator))
     lawed = None
@@ -340,10 +349,13 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             at_model = p
             if taken is not None:
                 full_search = _without_hertz_floor(full_search)
+                if bed_floor is not None:
+                    bed_floor = replace(bed_floor, hertz=None)
             p, full_simulator, search_simulator = _varied_pass(
                 lambda sim: _LawSwitched(sim, taken, k), recording_signals,
                 full_simulator, search_simulator, top_k=top_k, full_search=full_search,
-                replicates=replicates, level_beds=level_beds, numerics=numerics, **diagnose_kw)
+                replicates=replicates, level_beds=level_beds, numerics=numerics,
+                bed_floor=bed_floor, **diagnose_kw)
             _moved(lawed, "at_model_law", "law_fit", at_model, p,
                    _runs_made(full_simulator, search_simulator))
     rep, c, full, tier, d, checks = p.rep, p.c, p.full, p.tier, p.d, p.checks
@@ -355,7 +367,7 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
             answers[f] = _grain_decision(
                 f, recording_signals, full_simulator, search_simulator, top_k=top_k,
                 full_search=full_search, replicates=replicates, numerics=numerics,
-                level_beds=level_beds, **diagnose_kw)
+                level_beds=level_beds, bed_floor=bed_floor, **diagnose_kw)
         return answers[f]
 
     def holds(name: str) -> bool:
@@ -643,13 +655,14 @@ def _confirm_pass(baseline_signals: Mapping[str, Signal],
                   search_simulator: Simulator | None, *, top_k: int,
                   full_search: bool | Mapping[str, catalogue.FullSearch],
                   replicates: Sequence[Mapping[str, Any]], level_beds: int,
-                  numerics: Sequence[float], **diagnose_kw) -> _Pass:
+                  numerics: Sequence[float], bed_floor: catalogue.BedFloor | None = None,
+                  **diagnose_kw) -> _Pass:
     """The screening of ``recording_signals`` against ``baseline_signals``, the search and
     full tiers, the decision and the numerics check (``screen_then_confirm``'s steps before
     the grain check and the report; the grain check makes one per factor)."""
     rep = diagnose(baseline_signals, recording_signals, **diagnose_kw)
     c = _Confirmation(rep, top_k, full_search, diagnose_kw.get("hypotheses"), replicates,
-                      level_beds, baseline_signals)
+                      level_beds, baseline_signals, bed_floor)
     t_full = time.perf_counter()
     tier = (c.search_tier(search_simulator) if c.searched and search_simulator is not None
             else None)
@@ -887,8 +900,10 @@ class _Confirmation:
     def __init__(self, rep: Report, top_k: int,
                  full_search: bool | Mapping[str, catalogue.FullSearch],
                  allowed: Sequence[str] | None, replicates: Sequence[Mapping[str, Any]],
-                 level_beds: int = 1, baseline_signals: Mapping[str, Signal] | None = None):
+                 level_beds: int = 1, baseline_signals: Mapping[str, Signal] | None = None,
+                 bed_floor: catalogue.BedFloor | None = None):
         self.rep = rep
+        self.bed_floor = bed_floor
         self.chans = rep.channels
         self.primary = self.chans[0]
         by_name = {h["name"]: h for h in rep.hypotheses}
@@ -1073,9 +1088,14 @@ class _Confirmation:
         """Requests of the bed made stiffer by each of ``catalogue.STIFFER_SOIL_FACTORS``, whole
         and below its top grain row (``catalogue.stiffer_soil_depths``), on each bed of a
         deposited level (``catalogue.stiffer_soil_overrides``), when the layering is searched
-        with its stiffness form; else none."""
+        with its stiffness form; when the layering is not searched and a ``bed_floor`` is
+        given (a scenario with its own layering), the whole bed made stiffer through the
+        grains' impact modulus (``catalogue.BedFloor``) on each bed; else none."""
         lay = self.searched.get("soil_layering")
         out: list[Request] = []
+        if lay is None and self.bed_floor is not None and self.searched:
+            return [(STIFFER, {**ov, **rv, **self.cfc_key}, f)
+                    for f, ov in self.bed_floor.overrides() for rv in self.beds]
         for below in catalogue.stiffer_soil_depths(lay):
             for f in catalogue.STIFFER_SOIL_FACTORS:
                 ov = catalogue.stiffer_soil_overrides(lay, f, below)

@@ -326,11 +326,17 @@ def to_markdown(report, plots: list[str] | None = None,
             lines.append(f"| {ov or '-'} | {_fmt(r.get('score'))} | "
                          f"{'-' if db is None else f'{db:.1f}'} |")
         if real.get("stiffer_soil"):
+            below = any(str(r.get("form", "")).startswith("below")
+                        for r in real["stiffer_soil"])
             lines += ["", ("A stiffer soil is a recalibration, not missing physics: the floor "
                            "also holds the baseline's beds with the grains' modulus multiplied, "
-                           "in the whole bed and below its top grain row (a layer that shallow "
-                           "is not told apart from how stiff the surface grains are against the "
-                           "confined ones; the change averaged over the beds)"
+                           + ("in the whole bed and below its top grain row (a layer that "
+                              "shallow is not told apart from how stiff the surface grains are "
+                              "against the confined ones; the change averaged over the beds)"
+                              if below else
+                              "in the whole bed (both layers of the scenario's own layering, "
+                              "through the grains' impact modulus; the change averaged over "
+                              "the beds)")
                            + ("; and, as another code's realisation, the whole bed with the "
                               "Hertz-Mindlin contact law" if any(
                                   r.get("form") == HERTZ_FLOOR_FORM

@@ -119,3 +119,29 @@ def test_a_truth_of_other_grains(monkeypatch, tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--effect", "none", "--truth-grains", "2", "--out", str(tmp_path / "o")])
     assert "--truth-grains: grains=2.0: must be in [0.8, 1.5]" in capsys.readouterr().err
+
+
+def test_a_truth_in_another_contact_law(monkeypatch, tmp_path, capsys):
+    """``--truth-law hertz_mindlin --truth-young-factor F``: the null truth's impact in the
+    Hertz-Mindlin law at F x the grains' modulus (``soil.contact_law``,
+    ``soil.impact_young_factor``; the bed deposited as the scenario's), nothing else changed,
+    and keys the scenario takes; a law or a factor it does not take is refused naming the
+    field, before any run, and on the command line naming the options."""
+    from crashdem.diagnosis.generator_dem import scenario_path
+    from crashdem.scenario import load
+    from validation.diagnose_cost import check_law, main, truth_recording
+
+    null = _truth(monkeypatch, tmp_path, None, 0.0)
+    hm = _truth(monkeypatch, tmp_path, None, 0.0, None, 1.0, "hertz_mindlin", 8.0)
+    assert hm == {**null, "soil.contact_law": "hertz_mindlin", "soil.impact_young_factor": 8.0}
+    assert _truth(monkeypatch, tmp_path, None, 0.0, None, 1.0, "linear", 1.0) == null
+    load(scenario_path(), overrides=hm)
+    assert check_law("linear", 2) == ("linear", 2.0)
+    with pytest.raises(ValueError, match=r"law='hertz': must be one of linear, hertz_mindlin"):
+        truth_recording(None, 0.0, tmp_path, 1, None, 1.0, "hertz", 4.0)
+    for bad in (0.0, 1e3, float("nan")):
+        with pytest.raises(ValueError, match=r"young_factor=.*soil\.impact_young_factor"):
+            check_law("hertz_mindlin", bad)
+    with pytest.raises(SystemExit):
+        main(["--effect", "none", "--truth-young-factor", "0", "--out", str(tmp_path / "o")])
+    assert "--truth-law / --truth-young-factor: young_factor=0.0" in capsys.readouterr().err

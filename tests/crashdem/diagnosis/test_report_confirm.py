@@ -5,6 +5,7 @@ import json
 import math
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -2940,3 +2941,172 @@ def test_a_recording_the_other_contact_law_explains_is_not_claimed(tiered):
     assert len(made) == 5
     assert "the whole bed with the Hertz-Mindlin law (x4 the modulus)" in rep.decision
     assert rep.simulations["full_simulations"] == len(calls)
+
+
+def _modulus_simulator(calls: list, hertz: dict[str, Any] | None = None):
+    """``_form_simulator`` that also takes the grains' impact modulus factor
+    (``soil.impact_young_factor``): the whole bed that many times stiffer, which the ROM knows as
+    a stiffness layer just below the surface (``WHOLE_BED_DEPTH``); a run in the Hertz-Mindlin
+    law is the recording made with ``hertz`` (scenario keys) when given, else the linear law's."""
+    inner = _form_simulator(calls)
+
+    def full(overrides):
+        o = dict(overrides)
+        f = float(o.pop("soil.impact_young_factor", 1.0))
+        law = o.pop("soil.contact_law", "linear")
+        extra = dict(hertz) if law == "hertz_mindlin" and hertz else {}
+        if f != 1.0 and not extra:
+            assert not o.get("physics.soil_layering.enabled")  # no layering is searched here
+            extra = {"physics.soil_layering.enabled": True,
+                     "physics.soil_layering.depth": WHOLE_BED_DEPTH,
+                     "physics.soil_layering.lower_young_factor": f}
+        if not extra:
+            return inner(o)
+        out = inner({**o, **extra})
+        calls[-1] = dict(overrides)  # the call as the diagnosis made it
+        return out
+
+    return full
+
+
+def _diagnose_without_layering(truth: dict[str, Any], bed_floor, tiered: bool = False,
+                               hertz: dict[str, Any] | None = None):
+    """``screen_then_confirm`` as ``crashdem diagnose`` makes it on a scenario with its own
+    layering, where the layering is not searched: a recording of the stand-in with ``truth``
+    (scenario keys), the drop search without ``soil_layering``, 5 level beds, 4 replicates
+    and ``bed_floor`` (``catalogue.BedFloor``); with ``tiered`` the search and the floor on a
+    search simulator. Every run is counted, each distinct run once. The screening leaves the
+    layering out too: a claim of it would move the scenario's own interface, which no level of
+    the search runs (on two tiers its full run has only the reference to beat, and the
+    stand-in's recording of a stiffer bed is claimed as a layer there)."""
+    from crashdem import scenario as sc
+    from crashdem.diagnosis.catalogue import DROP
+    from crashdem.diagnosis.cli import rom_from_scenario
+
+    calls: list = []
+    search_calls: list = []
+    rec = acquire(rom_from_scenario(sc.loads(SCENARIO_TOML).with_overrides(truth)),
+                  np.random.default_rng(7))
+    kw = {"search_simulator": _modulus_simulator(search_calls, hertz)} if tiered else {}
+    rep = screen_then_confirm(
+        simulate(RomParams()), rec, _modulus_simulator(calls, hertz), top_k=2, numerics=(),
+        level_beds=5, full_search={k: v for k, v in DROP.full_search.items()
+                                   if k != "soil_layering"},
+        replicates=[{"scenario.seed": s} for s in (2, 3, 4, 5)], bed_floor=bed_floor,
+        hypotheses=[n for n in DROP.names if n != "soil_layering"], **kw)
+    for c in (calls, search_calls):
+        assert len({json.dumps(ov, sort_keys=True) for ov in c}) == len(c)
+    assert rep.simulations["full_simulations"] == len(calls)
+    if tiered:
+        assert rep.simulations["search_simulations"] == len(search_calls)
+        assert not any("soil.impact_young_factor" in ov for ov in calls)
+    return rep, (search_calls if tiered else calls)
+
+
+@pytest.mark.parametrize("tiered", [False, True], ids=["one tier", "search tier"])
+def test_a_stiffer_soil_is_in_the_floor_when_the_layering_is_the_scenarios(tiered, tmp_path):
+    """On a scenario with its own layering (the campaign's compacted lower part) the layering
+    is not searched, so the floor had no stiffer bed: a recording of the whole bed 5 x stiffer
+    (a wrong soil value, a recalibration) was named ``cohesion``, whose strong levels stand in
+    for a stiffer bed. With ``catalogue.BedFloor`` the whole bed runs x2 and x5 stiffer through
+    the grains' impact modulus and in the Hertz-Mindlin law at x4, on the 5 level beds, beside
+    the replicates (``fit.realisation.stiffer_soil``, counted), and nothing is named; a
+    cohesion, a floor and a contact damping are still named, at their values. Fails without
+    the runs (cohesion is named)."""
+    from crashdem.diagnosis.catalogue import HERTZ_FLOOR_FORM, BedFloor
+
+    stiff = {"physics.soil_layering.enabled": True,
+             "physics.soil_layering.depth": WHOLE_BED_DEPTH,
+             "physics.soil_layering.lower_young_factor": 5.0}
+    rep, _ = _diagnose_without_layering(stiff, None, tiered)
+    assert rep.missing_physics == "cohesion", rep.decision
+    assert not rep.fit["realisation"].get("stiffer_soil")
+
+    floor = BedFloor(hertz=4.0)
+    assert floor.factors == STIFFER_SOIL_FACTORS
+    rep, made = _diagnose_without_layering(stiff, floor, tiered)
+    assert rep.missing_physics is None, rep.decision
+    real = rep.fit["realisation"]
+    assert [(s["form"], s["young_factor"], s["runs"]) for s in real["stiffer_soil"]] == [
+        ("whole bed", 2.0, 5), ("whole bed", 5.0, 5), (HERTZ_FLOOR_FORM, 4.0, 5)]
+    assert real["floor_delta_bic"] == pytest.approx(
+        max(s["delta_bic_vs_reference"] for s in real["stiffer_soil"]))
+    # each stiffer run on a level bed: the baseline's packing and the 4 replicates'
+    seeds = sorted(ov.get("scenario.seed", 1) for ov in made
+                   if ov.get("soil.impact_young_factor") == 5.0)
+    assert seeds == [1, 2, 3, 4, 5]
+    assert sum(ov.get("soil.contact_law") == "hertz_mindlin" for ov in made) == 5
+    assert ("and the whole bed x2 / x5 stiffer and the whole bed with the Hertz-Mindlin law "
+            "(x4 the modulus)" in rep.decision)
+    write_report(rep, tmp_path, plots=False)
+    md = (tmp_path / "report.md").read_text()
+    assert "in the whole bed (both layers of the scenario's own layering" in md
+    assert "below its top grain row" not in md
+
+    for truth, name, key, value in (
+            ({"physics.cohesion.enabled": True, "physics.cohesion.normal_strength": 1.2e5,
+              "physics.cohesion.shear_strength": 1.2e5}, "cohesion", "cohesion", 1.2e5),
+            ({"physics.boundary_proximity.enabled": True,
+              "physics.boundary_proximity.floor_depth": 0.9}, "boundary_proximity",
+             "floor_depth", 0.9),
+            ({"physics.contact_damping.enabled": True,
+              "physics.contact_damping.restitution": 0.2}, "contact_damping", "restitution",
+             0.2)):
+        rep, _ = _diagnose_without_layering(truth, floor, tiered)
+        assert rep.missing_physics == name, rep.decision
+        h = next(h for h in rep.hypotheses if h["name"] == name)
+        assert abs(h["parameters"][key] / value - 1.0) < 0.15, h["parameters"]
+
+
+def test_the_bed_floor_is_the_command_lines_on_a_layered_scenario(monkeypatch):
+    """``crashdem diagnose`` gives the floor's stiffer soil through the modulus
+    (``cli._bed_floor``) when the scenario has its own layering and the search runs: with the
+    Hertz-Mindlin run at ``HERTZ_FLOOR_YOUNG_FACTOR`` for a linear scenario, without it for a
+    Hertz-Mindlin one; not when the layering is searched (its stiffness form makes the runs),
+    nor without a search, nor without a layering. A law fit that takes the other law drops the
+    Hertz-Mindlin run (it would be that law at another modulus), as it drops
+    ``FullSearch.hertz_floor``. Bad factors name the field and the range."""
+    from types import SimpleNamespace
+
+    from crashdem import scenario as sc
+    from crashdem.diagnosis import confirm
+    from crashdem.diagnosis.catalogue import DROP, HERTZ_FLOOR_YOUNG_FACTOR, BedFloor
+    from crashdem.diagnosis.cli import _bed_floor
+
+    base = sc.loads(SCENARIO_TOML)
+    layered = base.with_overrides({"physics.soil_layering.enabled": True,
+                                   "physics.soil_layering.depth": 1.0})
+    fs = {k: v for k, v in DROP.full_search.items() if k != "soil_layering"}
+    assert _bed_floor(layered, fs) == BedFloor(hertz=HERTZ_FLOOR_YOUNG_FACTOR)
+    assert _bed_floor(layered.with_overrides({"soil.contact_law": "hertz_mindlin"}),
+                      fs) == BedFloor()
+    assert _bed_floor(layered, {}) is None
+    assert _bed_floor(base, fs) is None
+    assert _bed_floor(base, DROP.full_search) is None
+    assert BedFloor(hertz=4.0).overrides() == [
+        (2.0, {"soil.impact_young_factor": 2.0}), (5.0, {"soil.impact_young_factor": 5.0}),
+        (4.0, {"soil.impact_young_factor": 4.0, "soil.contact_law": "hertz_mindlin"})]
+    for bad in ({"factors": (2.0, 0.0)}, {"hertz": 1e3}, {"factors": (float("nan"),)}):
+        with pytest.raises(ValueError, match=r"BedFloor\.(factors|hertz).*impact_young_factor"):
+            BedFloor(**bad)
+
+    class Stop(Exception):
+        pass
+
+    seen: dict = {}
+
+    def varied(make, rec, full, search, **kw):
+        seen.update(kw, law=make(full).law)
+        raise Stop
+
+    monkeypatch.setattr(confirm, "_confirm_pass", lambda *a, **kw: SimpleNamespace(
+        c=SimpleNamespace(model_free=None, cfc_key={})))
+    monkeypatch.setattr(confirm, "_varied_pass", varied)
+    for law, hertz in (("hertz_mindlin", None), (confirm.OWN_LAW, 4.0)):
+        monkeypatch.setattr(confirm, "_law_fit", lambda *a, _law=law, **kw: {"chosen": {
+            "impact_young_factor": 4.0, "contact_law": _law}})
+        with pytest.raises(Stop):
+            screen_then_confirm({}, {}, lambda ov: {}, law_fit=(2.0, 4.0),
+                                bed_floor=BedFloor(hertz=4.0), full_search=fs)
+        assert seen["bed_floor"] == BedFloor(hertz=hertz)
+        assert seen["law"] == (None if law == confirm.OWN_LAW else law)
