@@ -88,15 +88,15 @@ def check_grains(grains: float) -> float:
 def check_law(law: str, young_factor: float) -> tuple[str, float]:
     """The truth's contact law and impact modulus factor (``--truth-law``,
     ``--truth-young-factor``); ValueError naming the field and what it may be."""
+    from crashdem.diagnosis.catalogue import impact_young_range
     from crashdem.scenario import SCHEMA
 
     laws = SCHEMA["soil"]["contact_law"].choices
     if law not in laws:
         raise ValueError(f"law={law!r}: must be one of {', '.join(laws)} (soil.contact_law)")
-    spec = SCHEMA["soil"]["impact_young_factor"]
-    if not (math.isfinite(float(young_factor))
-            and float(spec.lo) <= float(young_factor) <= float(spec.hi)):
-        raise ValueError(f"young_factor={young_factor!r}: must be in [{spec.lo:g}, {spec.hi:g}] "
+    lo, hi = impact_young_range()
+    if not (math.isfinite(float(young_factor)) and lo <= float(young_factor) <= hi):
+        raise ValueError(f"young_factor={young_factor!r}: must be in [{lo:g}, {hi:g}] "
                          "(soil.impact_young_factor)")
     return law, float(young_factor)
 

@@ -25,7 +25,7 @@ from typing import Any, Callable, Mapping
 
 __all__ = ["ParameterSpec", "Hypothesis", "Variant", "FullSearch", "DROP_FULL_SEARCH",
            "STIFFER_SOIL_FACTORS", "DAMPING_FORMS", "WHOLE_BED_DEPTH", "stiffer_soil_overrides",
-           "layer_level_factor", "BedFloor",
+           "layer_level_factor", "BedFloor", "impact_young_range",
            "stiffer_soil_depths",
            "CATALOGUE", "RECALIBRATION", "NAMES", "get", "combine",
            "Catalogue", "DROP", "drop_catalogue", "planar_catalogue",
@@ -629,6 +629,15 @@ def hertz_floor_overrides(fs: FullSearch | None) -> dict[str, Any] | None:
     return None if ov is None else {**ov, "soil.contact_law": "hertz_mindlin"}
 
 
+def impact_young_range() -> tuple[float, float]:
+    """The allowed ``soil.impact_young_factor`` (the grains' impact modulus factor), from the
+    scenario schema."""
+    from crashdem.scenario import SCHEMA
+
+    field = SCHEMA["soil"]["impact_young_factor"]
+    return float(field.lo), float(field.hi)
+
+
 @dataclass(frozen=True)
 class BedFloor:
     """The realisation floor's stiffer soil on a search that has no layering to make it with
@@ -645,10 +654,7 @@ class BedFloor:
     hertz: float | None = None
 
     def __post_init__(self) -> None:
-        from crashdem.scenario import SCHEMA
-
-        spec = SCHEMA["soil"]["impact_young_factor"]
-        lo, hi = float(spec.lo), float(spec.hi)
+        lo, hi = impact_young_range()
         for name, fs in (("factors", self.factors),
                          ("hertz", () if self.hertz is None else (self.hertz,))):
             for f in fs:

@@ -23,13 +23,16 @@ import functools
 import math
 from dataclasses import replace
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import numpy as np
 
 from crashdem.diagnosis.rom import ACCEL, VELOCITY, RomParams, RomSettings, simulate
 from crashdem.diagnosis.rom_planar import PLANAR_CHANNELS, PlanarParams, simulate_planar
 from crashdem.signal import Signal
+
+if TYPE_CHECKING:
+    from crashdem.diagnosis.catalogue import BedFloor
 
 __all__ = ["diagnose_command", "rom_from_scenario", "planar_from_scenario", "planar_geometry",
            "DROP_SPHERE_RADIUS", "DROP_SPHERE_MASS"]
@@ -820,7 +823,7 @@ def _search_setup(scen, planar: bool, mode: str, cmap: dict[str, str], out: Path
                                 "scenario's only)" if bed is not None else "") + note)
 
 
-def _bed_floor(scen, searched: Mapping[str, Any]) -> Any:
+def _bed_floor(scen, searched: Mapping[str, Any]) -> BedFloor | None:
     """The realisation floor's stiffer soil (``catalogue.BedFloor``) for a search in which the
     layering is not searched because the scenario has its own (the reference campaign's
     compacted lower part): the whole bed x2 / x5 stiffer through the grains' impact modulus,

@@ -35,7 +35,7 @@ import numpy as np
 from crashdem.diagnosis import (FILTER_CLASS_VARIANT, SPEED_OFFSET_SIGMAS, Report, Simulator,
                                 _at_off, _remaining_mismatch, _si, _speed_found,
                                 catalogue, diagnose)
-from crashdem.diagnosis.catalogue import RECALIBRATION
+from crashdem.diagnosis.catalogue import RECALIBRATION, impact_young_range
 from crashdem.diagnosis.distributed import RADIUS_SCALE_KEY
 from crashdem.diagnosis.fit import ACCEPT_MARGIN, score_signals
 from crashdem.diagnosis.mismatch import (SIMULATED_SPAN, align, describe_changes, feature_changes,
@@ -404,15 +404,6 @@ def screen_then_confirm(baseline_signals: Mapping[str, Signal],
                         h["contact_law"] = law_fit_law
                     h["impact_young_factor"] = lawed["chosen"]["impact_young_factor"]
     return rep
-
-
-def impact_young_range() -> tuple[float, float]:
-    """The allowed ``soil.impact_young_factor`` (``IMPACT_YOUNG_KEY``), from the scenario
-    schema."""
-    from crashdem.scenario import SCHEMA
-
-    field = SCHEMA["soil"]["impact_young_factor"]
-    return float(field.lo), float(field.hi)
 
 
 def _moved(fitted: dict[str, Any], at: str, name: str, at_model: _Pass, p: _Pass,
